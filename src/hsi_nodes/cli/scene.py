@@ -45,7 +45,10 @@ def cmd_generate(args: argparse.Namespace) -> int:
 
 
 def _register_cloud(scene_sub: argparse._SubParsersAction) -> None:
-    """Place for ``hsi scene cloud`` (rendered, labelled point clouds), added by the perception work."""
+    """Add ``hsi scene cloud`` (rendered, labelled point clouds to PLY)."""
+    from hsi_nodes.cli.scene_cloud import add_cloud_command
+
+    add_cloud_command(scene_sub)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

@@ -1,6 +1,6 @@
 """Runs a parsed launch description: builds the transport, starts the nodes, spins, shuts down cleanly.
 
-All nodes live in this process on one transport (``inproc``) and one :class:`~hsi_nodes.node.Executor`.
+All nodes live in this process on one transport (``inproc``) and one :class:`~hsi_nodes.executor.Executor`.
 A run ends after ``duration_s`` of clock time, when every node with a finite task reports done, when
 simulated time has nothing left to do, or on Ctrl-C; then queued messages are delivered, every node's
 ``on_shutdown`` runs (recorders finish their bags) and the transport closes.
@@ -15,8 +15,9 @@ from dataclasses import dataclass
 from types import TracebackType
 from typing import Any, Self
 
+from hsi_nodes.executor import Executor
 from hsi_nodes.launch.description import LaunchDescription, NodeSpec
-from hsi_nodes.node import Executor, Node
+from hsi_nodes.node import Node
 from hsi_nodes.nodes import load_executable
 from hsi_nodes.transport import Transport, make_transport
 from hsi_planning.errors import HsiError, LaunchError

@@ -20,6 +20,8 @@ NODE_EXECUTABLES: dict[str, str] = {
     "echo": "hsi_nodes.nodes.talker_nodes:EchoNode",
     "topic_relay": "hsi_nodes.nodes.talker_nodes:TopicRelayNode",
     "recorder_node": "hsi_nodes.nodes.recorder_node:RecorderNode",
+    "sim_node": "hsi_nodes.nodes.sim_node:SimNode",
+    "scene_cloud_node": "hsi_nodes.nodes.scene_cloud_node:SceneCloudNode",
 }
 
 
