@@ -78,9 +78,9 @@ class JointTrajectory:
         A floating-base quaternion is re-normalized after interpolation.
         """
         if time <= self.t[0]:
-            return self.q[0].copy()
+            return np.array(self.q[0], dtype=np.float64)
         if time >= self.t[-1]:
-            return self.q[-1].copy()
+            return np.array(self.q[-1], dtype=np.float64)
         i = int(np.searchsorted(self.t, time)) - 1
         a = (time - self.t[i]) / (self.t[i + 1] - self.t[i])
         return np.asarray((1.0 - a) * self.q[i] + a * self.q[i + 1])
