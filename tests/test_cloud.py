@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from collections import Counter
 from pathlib import Path
 from typing import Any
@@ -259,7 +260,7 @@ Kitchen = tuple[Any, Any, LabelledCloud, list[CameraView]]
 
 @pytest.fixture(scope="module")
 def kitchen(repo_root: Path) -> Kitchen:
-    from hsi_planning.perception.render import scene_renderer
+    from hsi_planning.perception import scene_renderer
     from hsi_planning.scene import load_scene_spec, scene_labels
 
     spec = load_scene_spec(repo_root / "sim" / "scenes" / "kitchen.yaml")
@@ -314,7 +315,7 @@ def test_kitchen_every_clearly_visible_object_gets_points(kitchen: Kitchen) -> N
 
 
 def test_kitchen_cloud_carries_the_label_table_and_round_trips(kitchen: Kitchen, tmp_path: Path) -> None:
-    from hsi_planning.perception.render import scene_cloud
+    from hsi_planning.perception import scene_cloud
 
     spec, table, cloud, _ = kitchen
     assert cloud.label_names == {lab.id: lab.name for lab in table}
@@ -325,3 +326,44 @@ def test_kitchen_cloud_carries_the_label_table_and_round_trips(kitchen: Kitchen,
     back = read_ply(write_ply(tmp_path / "kitchen.ply", cloud))
     np.testing.assert_array_equal(back.points, cloud.points)
     assert back.label_names == cloud.label_names and back.label_classes == cloud.label_classes
+
+
+def test_unnamed_and_orthographic_cameras() -> None:
+    import mujoco
+
+    xml = SMALL_XML.replace(
+        '<camera name="cam_right"', '<camera pos="0 0 3" xyaxes="1 0 0 0 1 0"/><camera name="cam_right"'
+    ).replace(
+        '<camera name="cam_left"',
+        '<camera name="ortho" projection="orthographic" fovy="2" pos="0 0 3"/>\n<camera name="cam_left"',
+    )
+    model = mujoco.MjModel.from_xml_string(xml)
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    with CloudRenderer(model, SMALL_LABELS) as renderer:
+        names = renderer.camera_names()
+        assert names[0] == "ortho" and "#2" in names
+        top = renderer.render_view(data, "#2").points()  # looking straight down from 3 m
+        assert set(top.present_labels().tolist()) >= {0, 1, 2, 3}
+        table_z = top.points[top.labels == 1, 2]
+        assert table_z.max() < 0.7 + 1e-3  # nothing above the table top...
+        assert abs(np.median(table_z) - 0.7) < 1e-3  # ...which fills most of the view from above
+        with pytest.raises(CloudError, match="orthographic"):
+            renderer.render_view(data, "ortho")
+        with pytest.raises(CloudError, match="not in the model"):
+            renderer.render_view(data, "#9")
+
+
+def test_headless_backend_choice(monkeypatch: pytest.MonkeyPatch) -> None:
+    from hsi_planning import gl
+
+    monkeypatch.setenv("MUJOCO_GL", "osmesa")
+    assert gl.ensure_headless_gl() == "osmesa"  # a user's choice is kept
+    monkeypatch.delenv("MUJOCO_GL")
+    monkeypatch.delenv("PYOPENGL_PLATFORM", raising=False)
+    expected = "egl" if gl._library_available("EGL") else "osmesa"
+    assert gl.ensure_headless_gl() == expected
+    assert os.environ["MUJOCO_GL"] == expected
+    monkeypatch.delenv("MUJOCO_GL")
+    monkeypatch.setattr(gl, "_library_available", lambda name: name == "OSMesa")
+    assert gl.ensure_headless_gl() == "osmesa" and os.environ["PYOPENGL_PLATFORM"] == "osmesa"

@@ -23,17 +23,29 @@ from numpy.typing import NDArray
 
 from hsi_planning.errors import CloudError, ConfigError
 from hsi_planning.gl import ensure_headless_gl
-from hsi_planning.perception.cloud import UNLABELLED, LabelledCloud, voxel_downsample
+from hsi_planning.perception.cloud import LabelledCloud, voxel_downsample
+from hsi_planning.perception.labels import body_labels, geom_labels, label_maps
+from hsi_planning.perception.view import NO_GEOM, CameraView
 
 if TYPE_CHECKING:
     import mujoco
 
-    from hsi_planning.scene import LabelTable, SceneSpec
+    from hsi_planning.scene import SceneSpec
+
+__all__ = [
+    "NO_GEOM",
+    "CameraView",
+    "CloudConfig",
+    "CloudRenderer",
+    "body_labels",
+    "label_maps",
+    "render_cloud",
+    "render_rgb",
+    "scene_cloud",
+    "scene_renderer",
+]
 
 _LOG = logging.getLogger(__name__)
-
-#: Label of a pixel that shows no geom at all (background) or a geom that is dropped.
-NO_GEOM = -2
 
 # Importing this module picks the headless GL backend, so a later ``import mujoco`` uses it.
 ensure_headless_gl()
@@ -62,81 +74,6 @@ class CloudConfig:
             raise ConfigError(
                 f"need 0 <= min_depth < max_depth < inf [m], got {self.min_depth}, {self.max_depth}"
             )
-
-
-@dataclass(frozen=True, eq=False)
-class CameraView:
-    """One camera's labelled depth image and its geometry.
-
-    Attributes:
-        camera: camera name.
-        depth: (H, W) float32 [m] distance along the camera's viewing axis; inf where no geom.
-        label: (H, W) int32 label per pixel; -1 = unmapped body, ``NO_GEOM`` (-2) = nothing/dropped.
-        rays: (H, W, 3) float64 camera-frame direction per pixel with z = -1 (point = rays * depth).
-        position: (3,) [m] camera position, world frame.
-        rotation: (3, 3) camera-to-world rotation (columns: camera x right, y up, z backwards).
-    """
-
-    camera: str
-    depth: NDArray[np.float32]
-    label: NDArray[np.int32]
-    rays: NDArray[np.float64]
-    position: NDArray[np.float64]
-    rotation: NDArray[np.float64]
-
-    def pixel_counts(self) -> dict[int, int]:
-        """Pixels showing each label (``NO_GEOM`` excluded)."""
-        ids, counts = np.unique(self.label[self.label != NO_GEOM], return_counts=True)
-        return {int(i): int(c) for i, c in zip(ids, counts, strict=True)}
-
-    def projected_areas(self) -> dict[int, float]:
-        """Per label, the summed footprint [m^2] of its pixels on planes facing the camera
-        (depth^2 x pixel angular size): the visible surface area it shows, not counting obliqueness
-        (a tilted surface has more area than this)."""
-        du = float(self.rays[0, 1, 0] - self.rays[0, 0, 0]) if self.rays.shape[1] > 1 else 0.0
-        dv = float(self.rays[0, 0, 1] - self.rays[1, 0, 1]) if self.rays.shape[0] > 1 else du
-        seen = self.label != NO_GEOM
-        area = self.depth[seen].astype(np.float64) ** 2 * abs(du * (dv or du))
-        ids, inverse = np.unique(self.label[seen], return_inverse=True)
-        sums = np.bincount(inverse.reshape(-1), area, len(ids))
-        return {int(i): float(a) for i, a in zip(ids, sums, strict=True)}
-
-    def points(self, min_depth: float = 0.0, max_depth: float = np.inf) -> LabelledCloud:
-        """Back-project the pixels showing a geom with ``min_depth <= depth <= max_depth`` [m]."""
-        valid = (self.label != NO_GEOM) & (self.depth >= min_depth) & (self.depth <= max_depth)
-        cam = self.rays[valid] * self.depth[valid].astype(np.float64)[:, None]
-        world = cam @ self.rotation.T + self.position
-        return LabelledCloud(world, self.label[valid])
-
-
-def _geom_labels(
-    model: mujoco.MjModel, labels: Mapping[str, int], keep_unlabelled: bool
-) -> NDArray[np.int32]:
-    """(ngeom,) label id of every geom: body (or nearest mapped ancestor) name -> id."""
-    import mujoco
-
-    out = np.full(model.ngeom, UNLABELLED if keep_unlabelled else NO_GEOM, np.int32)
-    for g in range(model.ngeom):
-        body = int(model.geom_bodyid[g])
-        while body != 0:
-            name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, body)
-            if name is not None and name in labels:
-                out[g] = labels[name]
-                break
-            body = int(model.body_parentid[body])
-        else:
-            name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g)
-            if name is not None and name in labels:
-                out[g] = labels[name]
-    return out
-
-
-def body_labels(model: mujoco.MjModel) -> tuple[dict[str, int], dict[int, str]]:
-    """Default label mapping: every named body (world excluded) gets its body id as label."""
-    import mujoco
-
-    names = {b: mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b) for b in range(1, model.nbody)}
-    return {n: b for b, n in names.items() if n}, {b: n for b, n in names.items() if n}
 
 
 class CloudRenderer:
@@ -172,7 +109,7 @@ class CloudRenderer:
         self._label_names = dict(label_names) if label_names is not None else default_names
         self._label_classes = dict(label_classes) if label_classes is not None else None
         self._labels = dict(labels)
-        self._geom_label = {keep_unlabelled: _geom_labels(model, self._labels, keep_unlabelled)}
+        self._geom_label = {keep_unlabelled: geom_labels(model, self._labels, keep_unlabelled)}
         self._max_size = (int(model.vis.global_.offwidth), int(model.vis.global_.offheight))
         self._gl: Any = None
         self._ctx: Any = None
@@ -215,13 +152,19 @@ class CloudRenderer:
         self.close()
 
     def __del__(self) -> None:
-        self.close()
+        try:
+            self.close()
+        except Exception as exc:  # interpreter shutdown: GL libraries may be gone already
+            _LOG.debug("CloudRenderer.__del__: %s", exc)
 
     # -- rendering -------------------------------------------------------------------------------
     def _camera_id(self, camera: str) -> int:
         import mujoco
 
-        cid = mujoco.mj_name2id(self._model, mujoco.mjtObj.mjOBJ_CAMERA, camera)
+        if camera.startswith("#") and camera[1:].isdigit():
+            cid = int(camera[1:]) if int(camera[1:]) < self._model.ncam else -1
+        else:
+            cid = mujoco.mj_name2id(self._model, mujoco.mjtObj.mjOBJ_CAMERA, camera)
         if cid < 0:
             raise CloudError(f"camera {camera!r} not in the model; cameras: {self.camera_names()}")
         return int(cid)
@@ -299,7 +242,7 @@ class CloudRenderer:
         segid = segid[..., 0] + (segid[..., 1] << 8) + (segid[..., 2] << 16)
         geom = seg_to_geom[np.minimum(segid, ngeom)]
         if keep_unlabelled not in self._geom_label:
-            self._geom_label[keep_unlabelled] = _geom_labels(self._model, self._labels, keep_unlabelled)
+            self._geom_label[keep_unlabelled] = geom_labels(self._model, self._labels, keep_unlabelled)
         lut = self._geom_label[keep_unlabelled]
         label = np.where(geom >= 0, lut[np.maximum(geom, 0)], NO_GEOM).astype(np.int32)
         extent = float(self._model.stat.extent)
@@ -377,15 +320,6 @@ def render_rgb(
     """(H, W, 3) uint8 colour image of ``camera`` (one-shot; for repeated images keep a CloudRenderer)."""
     with CloudRenderer(model) as renderer:
         return renderer.render_rgb(data, camera, width, height)
-
-
-def label_maps(table: LabelTable) -> tuple[dict[str, int], dict[int, str], dict[int, str]]:
-    """(name -> id, id -> name, id -> semantic class) of a scene label table."""
-    return (
-        {lab.name: lab.id for lab in table},
-        {lab.id: lab.name for lab in table},
-        {lab.id: lab.semantic_class for lab in table},
-    )
 
 
 def scene_renderer(spec: SceneSpec) -> tuple[mujoco.MjModel, mujoco.MjData, CloudRenderer]:

@@ -1,12 +1,17 @@
 """Segmentation of an unlabelled cloud (a real sensor's) into object clusters with open3d.
 
-Pipeline: optional crop to a region of interest and voxel downsampling; then repeated RANSAC plane
-fits (``segment_plane``) remove the large support and furniture planes (floor, counter top, shelf
-boards, carcass walls). A fitted plane only removes inliers that form a large connected patch: its
-inliers are clustered and only patches with enough points and a large enough extent are removed, so
-the thin slice of a bottle that happens to lie in the counter-top plane elsewhere, or the flat top of
-a box, survives. The remainder is clustered with DBSCAN (``cluster_dbscan``); small clusters become
-noise. Cluster ids are dense, ordered by decreasing size; ``-1`` = plane, noise or outside the ROI.
+Pipeline (z is up; furniture surfaces are level or plumb):
+
+1. Optional crop to a region of interest and voxel downsampling.
+2. Repeated RANSAC (``segment_plane``). A horizontal/vertical fit is snapped to exactly level/plumb
+   at the densest position (RANSAC often returns a slightly tilted plane through a small board), and
+   only inliers forming a connected patch with many points and a furniture-sized extent are removed,
+   so an object's slice that happens to lie in the counter-top plane, or a box top, survives.
+3. A level sweep removes wide horizontal patches too sparse for RANSAC (a board seen edge-on).
+4. DBSCAN (``cluster_dbscan``) of the rest; small clusters are dissolved, and loose points join the
+   nearest cluster within ``attach_radius`` (sparse grazing samples, thin handles and spouts).
+
+Cluster ids are dense, ordered by decreasing size; ``-1`` = plane, noise or outside the ROI.
 """
 
 from __future__ import annotations
@@ -38,12 +43,14 @@ class SegmentConfig:
     max_planes: int = 24  #: plane fits attempted at most [-]
     plane_min_points: int = 300  #: a removed planar patch has at least this many points [-]
     plane_min_extent: float = 0.2  #: ... and spans at least this much along its longer side [m]
-    plane_patch_eps: float = 0.025  #: neighbour distance that connects points of one planar patch [m]
+    plane_patch_eps: float = 0.035  #: neighbour distance that connects points of one planar patch [m]
+    level_min_extent: float = 0.35  #: level sweep: horizontal patches this wide are removed (0 = off) [m]
+    level_min_points: int = 20  #: level sweep: fewest points of a horizontal level [-]
     orientations: Literal["horizontal", "vertical", "both"] = "both"  #: plane normals removed [-]
     max_tilt_deg: float = 10.0  #: tolerance of "horizontal"/"vertical" plane normals [deg]
     dbscan_eps: float = 0.02  #: DBSCAN neighbourhood radius [m]
-    dbscan_min_points: int = 6  #: DBSCAN core-point neighbour count [-]
-    min_cluster_points: int = 20  #: smaller clusters are dissolved (their points become noise) [-]
+    dbscan_min_points: int = 3  #: DBSCAN core-point neighbour count [-]
+    min_cluster_points: int = 40  #: smaller clusters are dissolved (their points become noise) [-]
     attach_radius: float = 0.04  #: noise points this close to a cluster join it (0 = off) [m]
     seed: int = 0  #: seed of open3d's RANSAC sampler [-]
 
@@ -58,9 +65,15 @@ class SegmentConfig:
         for name in ("plane_distance", "plane_patch_eps", "dbscan_eps"):
             if not getattr(self, name) > 0.0:
                 raise ConfigError(f"{name} must be > 0 m, got {getattr(self, name)}")
-        if min(self.voxel_size, self.plane_min_extent, self.attach_radius) < 0.0:
-            raise ConfigError("voxel_size, plane_min_extent and attach_radius must be >= 0 m")
-        for name in ("plane_iterations", "plane_min_points", "dbscan_min_points", "min_cluster_points"):
+        if min(self.voxel_size, self.plane_min_extent, self.attach_radius, self.level_min_extent) < 0.0:
+            raise ConfigError("voxel_size, plane_min_extent, level_min_extent, attach_radius must be >= 0 m")
+        for name in (
+            "plane_iterations",
+            "plane_min_points",
+            "level_min_points",
+            "dbscan_min_points",
+            "min_cluster_points",
+        ):
             if getattr(self, name) < 1:
                 raise ConfigError(f"{name} must be >= 1, got {getattr(self, name)}")
         if self.max_planes < 0:
@@ -99,7 +112,11 @@ def _orientation(normal: NDArray[np.float64], max_tilt_deg: float) -> str:
 
 
 def _large_patches(
-    pts: NDArray[np.float64], normal: NDArray[np.float64], cfg: SegmentConfig
+    pts: NDArray[np.float64],
+    normal: NDArray[np.float64],
+    cfg: SegmentConfig,
+    min_points: int | None = None,
+    min_extent: float | None = None,
 ) -> NDArray[np.bool_]:
     """(M,) bool: plane inliers that belong to a connected patch large enough to be a support/wall."""
     pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
@@ -110,11 +127,11 @@ def _large_patches(
     axis_v = np.cross(normal, axis_u)
     for cid in range(int(ids.max(initial=-1)) + 1):
         member = ids == cid
-        if np.count_nonzero(member) < cfg.plane_min_points:
+        if np.count_nonzero(member) < (cfg.plane_min_points if min_points is None else min_points):
             continue
         span_u = np.ptp(pts[member] @ axis_u)
         span_v = np.ptp(pts[member] @ axis_v)
-        if max(span_u, span_v) >= cfg.plane_min_extent:
+        if max(span_u, span_v) >= (cfg.plane_min_extent if min_extent is None else min_extent):
             keep |= member
     return keep
 
@@ -176,7 +193,7 @@ def _snap(
 def _remove_planes(
     work: NDArray[np.float64], cfg: SegmentConfig
 ) -> tuple[NDArray[np.bool_], NDArray[np.bool_], list[Plane]]:
-    """Repeated RANSAC: (removed (N,), planar (N,): any inlier of an accepted plane, planes)."""
+    """Repeated RANSAC: (removed (N,), planar (N,): inlier of an accepted plane, removed or not, planes)."""
     o3d.utility.random.seed(cfg.seed)
     removed = np.zeros(len(work), bool)
     planar = np.zeros(len(work), bool)
@@ -209,6 +226,44 @@ def _remove_planes(
             n = (float(normal[0]), float(normal[1]), float(normal[2]))
             planes.append(Plane(n, offset, kind, len(patch)))  # type: ignore[arg-type]
     return removed, planar, planes
+
+
+def _remove_levels(
+    work: NDArray[np.float64],
+    removed: NDArray[np.bool_],
+    planar: NDArray[np.bool_],
+    planes: list[Plane],
+    cfg: SegmentConfig,
+) -> None:
+    """In place (also appends to ``planes``): remove wide horizontal patches RANSAC cannot find
+    (too few points, e.g. a board seen edge-on from a camera at its height). A level is a peak of
+    the z histogram of the remaining points (3x denser than 2-3 cm above and below, which excludes
+    slices of walls and objects); its patches wider than ``level_min_extent`` (more than any object)
+    are removed."""
+    rest = np.flatnonzero(~removed)
+    if len(rest) < cfg.level_min_points:
+        return
+    dist = cfg.plane_distance
+    z = work[rest, 2]
+    bins = np.floor((z - z.min()) / dist).astype(np.int64)
+    counts = np.bincount(bins)
+    window = np.convolve(counts, np.ones(3, np.int64), mode="same")
+    padded = np.pad(window, 3)
+    shells = np.maximum(padded[:-6], padded[6:])
+    local_max = window == np.max(np.lib.stride_tricks.sliding_window_view(np.pad(window, 2), 5), axis=1)
+    peaks = np.flatnonzero((window >= cfg.level_min_points) & (window >= 3 * shells) & local_max)
+    up = np.array([0.0, 0.0, 1.0])
+    for b in peaks:
+        near = rest[np.abs(bins - b) <= 1]
+        level = _densest(work[near, 2], 2.0 * dist)
+        layer = rest[(np.abs(z - level) <= dist) & ~removed[rest]]
+        if len(layer) < cfg.level_min_points:
+            continue
+        wide = _large_patches(work[layer], up, cfg, cfg.level_min_points, cfg.level_min_extent)
+        removed[layer[wide]] = True
+        planar[layer] = True
+        if wide.any():
+            planes.append(Plane((0.0, 0.0, 1.0), -level, "horizontal", int(np.count_nonzero(wide))))
 
 
 def segment_unlabelled(
@@ -245,6 +300,8 @@ def segment_unlabelled(
         work = np.stack([np.bincount(inverse, work[:, k]) for k in range(3)], axis=1)
         work /= np.bincount(inverse)[:, None]
     removed, planar, planes = _remove_planes(work, cfg)
+    if cfg.level_min_extent > 0.0:
+        _remove_levels(work, removed, planar, planes, cfg)
     rest = np.flatnonzero(~removed)
     cluster = np.full(len(work), -1, np.int64)
     if len(rest):
