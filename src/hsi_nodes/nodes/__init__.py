@@ -22,6 +22,7 @@ NODE_EXECUTABLES: dict[str, str] = {
     "recorder_node": "hsi_nodes.nodes.recorder_node:RecorderNode",
     "sim_node": "hsi_nodes.nodes.sim_node:SimNode",
     "scene_cloud_node": "hsi_nodes.nodes.scene_cloud_node:SceneCloudNode",
+    "scheduler_node": "hsi_nodes.nodes.scheduler_node:SchedulerNode",
 }
 
 

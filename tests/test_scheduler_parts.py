@@ -1,0 +1,323 @@
+"""Scheduler components: click/ray goals, floor map and fast marching (Eq. 23), stances, hand assignment
+(Eq. 24), auxiliary objects, schedule validation, the reach-model planner adapter."""
+
+from __future__ import annotations
+
+import itertools
+import math
+from typing import Any
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from hsi_planning.errors import ConfigError, PlanningError
+from hsi_planning.planning import PlanRequest
+from hsi_planning.scene import object_pose
+from hsi_planning.scene_paths import load_scene
+from hsi_planning.scheduler import (
+    BodyConfig,
+    CloudObstacles,
+    FloorMap,
+    HandState,
+    HipPose,
+    Keyframe,
+    NavigationConfig,
+    PickGoal,
+    PlaceGoal,
+    ReachModelPlanner,
+    SceneWorld,
+    Schedule,
+    StanceConfig,
+    StanceTarget,
+    WorldState,
+    approach_cost,
+    camera_ray,
+    candidate_assignments,
+    choose_stance,
+    deviation_cost,
+    enclosing_part,
+    plan_root_path,
+    ray_hit,
+    resolve_click,
+)
+
+
+@pytest.fixture(scope="module")
+def kitchen() -> SceneWorld:
+    return SceneWorld(load_scene("kitchen"))
+
+
+# ---------------------------------------------------------------------------------------- goals
+
+
+def test_click_on_object_resolves_to_pick(kitchen: SceneWorld) -> None:
+    centre = object_pose(kitchen.spec, "bottle1")[:3, 3] + [-0.035, 0.0, 0.1]  # front face of the bottle
+    goal = resolve_click(centre + np.array([-0.01, 0.0, 0.0]), kitchen.cloud(), kitchen.spec)
+    assert isinstance(goal, PickGoal) and goal.object_name == "bottle1"
+
+
+def test_click_on_free_counter_top_is_a_place_occupied_spot_is_not(kitchen: SceneWorld) -> None:
+    goal = resolve_click([0.72, -0.2, 0.9], kitchen.cloud(), kitchen.spec, footprint=(0.04, 0.12))
+    assert isinstance(goal, PlaceGoal) and goal.support == "counter1"
+    np.testing.assert_allclose(goal.position, [0.72, -0.2, 0.9], atol=1e-9)
+    beside_teapot = object_pose(kitchen.spec, "teapot1")[:3, 3] + [-0.12, 0.0, 0.0]
+    with pytest.raises(PlanningError, match=r"not free: \['teapot1'\]"):
+        resolve_click(beside_teapot, kitchen.cloud(), kitchen.spec, footprint=(0.06, 0.12))
+
+
+@pytest.mark.parametrize(
+    ("point", "message"),
+    [
+        ([0.3, 0.0, 1.5], r"hits nothing: the nearest point of the cloud \(\w+\) is 0\.\d+ m away"),
+        ([2.5, -2.0, 0.0], r"3\.20 m from the person, beyond max_distance 3\.0 m"),
+        (
+            [0.0, 1.2, 0.0],
+            r"is on the floor, 1\.20 m from the person; the floor is not a pick or place target",
+        ),
+        ([0.6, -0.45, 0.3], r"is on 'cabinet1/door1', fixed furniture that cannot be picked"),
+    ],
+)
+def test_bad_clicks_raise_clear_errors(kitchen: SceneWorld, point: list[float], message: str) -> None:
+    with pytest.raises(PlanningError, match=message):
+        resolve_click(point, kitchen.cloud(), kitchen.spec)
+
+
+def test_click_on_shelf_carcass_is_fixed_furniture(kitchen: SceneWorld) -> None:
+    cloud = kitchen.cloud()
+    side = cloud.points[cloud.mask("shelf1") & (cloud.points[:, 2] > 1.0) & (cloud.points[:, 2] < 1.2)]
+    assert len(side) > 10
+    with pytest.raises(PlanningError, match=r"is on 'shelf1', fixed furniture that cannot be picked"):
+        resolve_click(side[0], cloud, kitchen.spec)
+
+
+def test_camera_ray_through_projected_object_hits_it(kitchen: SceneWorld) -> None:
+    cam = kitchen.spec.cameras[0]
+    target = object_pose(kitchen.spec, "teapot1")[:3, 3] + [0.0, 0.0, 0.06]
+    pos, look = np.asarray(cam.pos), np.asarray(cam.target)
+    fwd = (look - pos) / np.linalg.norm(look - pos)
+    right = np.cross(fwd, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, fwd)
+    d = target - pos
+    half_h = math.tan(math.radians(cam.fovy) / 2)
+    w, h = cam.resolution
+    u = (d @ right / (d @ fwd) / (half_h * w / h) + 1.0) * w / 2
+    v = (1.0 - d @ up / (d @ fwd) / half_h) * h / 2
+    origin, direction = camera_ray(cam, (u, v))
+    np.testing.assert_allclose(direction, d / np.linalg.norm(d), atol=1e-9)
+    hit = ray_hit(origin, direction, kitchen.cloud())
+    goal = resolve_click(hit, kitchen.cloud(), kitchen.spec)
+    assert isinstance(goal, PickGoal) and goal.object_name == "teapot1"
+    with pytest.raises(PlanningError, match="hits nothing"):
+        ray_hit(origin, -direction, kitchen.cloud())
+    with pytest.raises(PlanningError, match="outside the 320x240 image"):
+        camera_ray(cam, (400, 10))
+
+
+# ------------------------------------------------------------------------------------ navigation
+
+
+def _wall_map() -> FloorMap:
+    """A 4 m square room with a 1.6 m wall across x = 1 from y = -0.8 to 0.8."""
+    wall = np.stack([np.full(81, 1.0), np.linspace(-0.8, 0.8, 81)], axis=1)
+    return FloorMap(wall, [-1.0, -2.0], [3.0, 2.0], 0.04)
+
+
+def test_approach_cost_eq23_values() -> None:
+    cfg = NavigationConfig(approach_length=0.4, approach_weight=4.0)
+    goal, heading = np.zeros(2), np.array([1.0, 0.0])
+    cells = np.array([[-0.2, 0.0], [0.2, 0.0], [0.0, 0.2], [0.0, -0.39], [-1.0, 0.0], [0.5, 0.0]])
+    np.testing.assert_allclose(approach_cost(cells, goal, heading, cfg), [1.0, 5.0, 3.0, 3.0, 1.0, 1.0])
+
+
+def test_fast_marching_path_goes_around_the_wall_and_arrives_along_the_heading() -> None:
+    floor = _wall_map()
+    cfg = NavigationConfig()
+    start, goal, heading = np.array([0.0, 0.0]), np.array([2.0, 0.5]), np.array([0.0, 1.0])
+    path = plan_root_path(floor, start, goal, heading, radius=0.25, config=cfg)
+    np.testing.assert_allclose(path[0], start) and np.testing.assert_allclose(path[-1], goal)
+    dense = np.vstack([a + np.linspace(0, 1, 10)[:, None] * (b - a) for a, b in itertools.pairwise(path)])
+    wall_dist = np.hypot(np.abs(dense[:, 0] - 1.0), np.maximum(np.abs(dense[:, 1]) - 0.8, 0.0))
+    assert wall_dist.min() >= 0.25 - 0.03  # around the wall with the body radius
+    assert np.abs(dense[:, 1]).max() > 0.8  # it did go around an end of the wall
+    length = float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
+    assert 2.0 < length < 3.5
+
+    def arrival(p: np.ndarray) -> float:
+        near = p[np.linalg.norm(p - goal, axis=1) <= 0.4]
+        d = near[-1] - near[0]
+        return float(d @ heading / np.linalg.norm(d))
+
+    plain = plan_root_path(
+        floor, start, goal, heading, radius=0.25, config=NavigationConfig(approach_weight=0.0)
+    )
+    assert arrival(path) > 0.75 and arrival(plain) < 0.3  # Eq. 23: the last 0.4 m follow the heading
+
+
+def test_fast_marching_errors() -> None:
+    floor = _wall_map()
+    with pytest.raises(PlanningError, match=r"root goal \[1\.0, 0\.0\] has -?0\.\d+ m clearance"):
+        plan_root_path(floor, [0.0, 0.0], [1.0, 0.0], [1.0, 0.0], radius=0.25, config=NavigationConfig())
+    boxed = floor.with_segments([[[0.5, -1.9], [0.5, 1.9]]])  # wall from side to side (map edge open)
+    closed = boxed.with_segments([[[0.5, 1.9], [0.5, 2.0]], [[0.5, -2.0], [0.5, -1.9]]])
+    with pytest.raises(PlanningError, match="no collision-free root path"):
+        plan_root_path(closed, [0.0, 0.0], [2.0, 0.0], [1.0, 0.0], radius=0.25, config=NavigationConfig())
+
+
+def test_stance_reaches_targets_or_says_how_far() -> None:
+    floor = _wall_map()
+    body = BodyConfig()
+    target = np.array([1.45, 1.4, 0.3])  # low, beside the wall's end
+    pose = choose_stance([StanceTarget("right", target)], floor, None, body, StanceConfig(), near=[0.0, 0.0])
+    shoulder = pose.shoulder("right", body)
+    assert np.linalg.norm(target - shoulder) <= body.reach_limit + 1e-9
+    assert pose.position[2] < body.standing_height and pose.pitch > 0.0  # crouched and leaning
+    assert floor.clearance(pose.xy[None])[0] >= body.body_radius
+    with pytest.raises(PlanningError, match=r"needs \d\.\d\d m of reach \(limit 0\.72 m\)"):
+        choose_stance([StanceTarget("left", np.array([1.5, 1.5, 2.6]))], floor, None, body, StanceConfig())
+
+
+def test_hip_pose_shoulders_lean_forward() -> None:
+    body = BodyConfig()
+    pose = HipPose(np.array([1.0, 2.0, 0.8]), math.radians(90.0), math.radians(30.0))
+    left = pose.shoulder("left", body)
+    expected = np.array([1.0, 2.0, 0.8]) + Rotation.from_euler("ZY", [math.pi / 2, math.pi / 6]).apply(
+        [0, 0.18, 0.45]
+    )
+    np.testing.assert_allclose(left, expected, atol=1e-12)
+    assert left[1] > 2.2 and left[0] < 1.0  # forward (+y) and to the left (-x) when facing +y
+    assert pose.reachable("left", left + np.array([0.0, 0.5, 0.0]), body)
+    assert not pose.reachable("left", left + np.array([0.0, 0.8, 0.0]), body)
+
+
+# ---------------------------------------------------------------------------------------- hands
+
+
+def test_candidate_assignments() -> None:
+    both_free = candidate_assignments(HandState(), both=False, has_part=True)
+    assert sorted(a.describe() for a in both_free) == [
+        "cotemporal: left opens and holds, right grasps, left closes",
+        "cotemporal: right opens and holds, left grasps, right closes",
+        "sequential: left opens, left grasps, right closes",
+        "sequential: right opens, right grasps, left closes",
+    ]
+    one = candidate_assignments(HandState(left="mug1"), both=False, has_part=True)
+    assert [a.describe() for a in one] == [
+        "sequential: right opens, right grasps, left open: no free hand to close"
+    ]
+    assert [a.grasp for a in candidate_assignments(HandState(), both=True, has_part=False)] == ["both"]
+    assert [a.grasp for a in candidate_assignments(HandState(), False, False, preferred="left")] == ["left"]
+    with pytest.raises(PlanningError, match="no free hand: left holds 'a', right holds 'b'"):
+        candidate_assignments(HandState("a", "b"), both=False, has_part=False)
+    with pytest.raises(PlanningError, match="needs both hands but right holds 'b'"):
+        candidate_assignments(HandState(right="b"), both=True, has_part=False)
+    with pytest.raises(ConfigError, match="hand='up'"):
+        candidate_assignments(HandState(), False, False, preferred="up")
+
+
+def test_hand_state_parse() -> None:
+    assert HandState.parse(["left:mug1"]) == HandState(left="mug1")
+    for bad in (["mug1"], ["middle:mug1"], ["left:"], ["left:a", "left:b"]):
+        with pytest.raises(ConfigError, match="holding"):
+            HandState.parse(bad)
+
+
+def _frames(t: float, hip: list[float], left: list[float], right: list[float]) -> list[Keyframe]:
+    q = [0.0, 0.0, 0.0, 1.0]
+    return [
+        Keyframe(t, "left_wrist", left, q, "idle", hand="left"),
+        Keyframe(t, "right_wrist", right, q, "idle", hand="right"),
+        Keyframe(t, "hip", hip, q, "idle"),
+        Keyframe(t, "root", [hip[0], hip[1], 0.0], q, "idle"),
+    ]
+
+
+def test_deviation_cost_eq24_counts_arm_motion_not_walking() -> None:
+    walk = Schedule(
+        "w",
+        tuple(
+            _frames(0.0, [0, 0, 1], [0.2, 0.2, 1], [0.2, -0.2, 1])
+            + _frames(2.0, [1, 0, 1], [1.2, 0.2, 1], [1.2, -0.2, 1])
+        ),
+    )
+    assert deviation_cost(walk, 2.0) == pytest.approx(4.0)  # only w * T: the hands moved with the body
+    reach = Schedule(
+        "r",
+        tuple(
+            _frames(0.0, [0, 0, 1], [0.2, 0.2, 1], [0.2, -0.2, 1])
+            + _frames(1.0, [0, 0, 1], [0.5, 0.6, 1], [0.2, -0.2, 1])
+        ),
+    )
+    assert deviation_cost(reach, 2.0) == pytest.approx(0.5 + 2.0)  # 0.5 m of left-arm motion + 2 m/s * 1 s
+
+
+# ---------------------------------------------------------------------------------------- schedule
+
+
+def test_schedule_validation() -> None:
+    frames = _frames(0.0, [0, 0, 1], [0.2, 0.2, 1], [0.2, -0.2, 1])
+    with pytest.raises(PlanningError, match="key_joint='head'"):
+        Keyframe(0.0, "head", [0, 0, 0], [0, 0, 0, 1], "idle")  # type: ignore[arg-type]
+    with pytest.raises(PlanningError, match="contact_event='bump'"):
+        Keyframe(0.0, "hip", [0, 0, 0], [0, 0, 0, 1], "idle", "bump")  # type: ignore[arg-type]
+    with pytest.raises(PlanningError, match="finite number >= 0"):
+        Keyframe(-1.0, "hip", [0, 0, 0], [0, 0, 0, 1], "idle")
+    later = _frames(1.0, [0, 0, 1], [0.2, 0.2, 1], [0.2, -0.2, 1])
+    with pytest.raises(PlanningError, match="sorted by time"):
+        Schedule("x", tuple(later + frames))
+    with pytest.raises(PlanningError, match="left_wrist must be strictly increasing"):
+        Schedule("x", tuple(frames + frames))
+    with pytest.raises(PlanningError, match="no hip keyframe at t = 5"):
+        Schedule("x", tuple(frames)).at("hip", 5.0)
+
+
+# ------------------------------------------------------------------------------------ auxiliary and planner
+
+
+def test_enclosing_part(kitchen: SceneWorld) -> None:
+    assert enclosing_part(kitchen, "bottle2", WorldState()) == "cabinet1/door1"
+    assert enclosing_part(kitchen, "mug2", WorldState()) == "drawer_unit1/drawer1"
+    assert enclosing_part(kitchen, "mug2", WorldState(opened=frozenset({"drawer_unit1/drawer1"}))) is None
+    assert enclosing_part(kitchen, "bottle1", WorldState()) is None
+
+
+def test_door_handle_and_leaf_follow_the_hinge(kitchen: SceneWorld) -> None:
+    part = kitchen.part("cabinet1/door1")
+    closed, opened = kitchen.handle_at(part.name, 0.0), kitchen.handle_at(part.name, 1.0)
+    r0 = np.linalg.norm((closed - part.point)[:2])
+    assert np.linalg.norm((opened - part.point)[:2]) == pytest.approx(r0)
+    assert (
+        opened[2] == pytest.approx(closed[2]) and opened[0] < closed[0] - 0.4
+    )  # swung out towards the person
+    angle = math.degrees(part.open_value)
+    assert angle == pytest.approx(0.9 * 110.0)
+    leaf = kitchen.door_panel(part.name, 0.0)
+    assert leaf[1][1] > leaf[0][1] and abs(leaf[1][0] - leaf[0][0]) < 0.05  # closed: along the front (+y)
+
+
+def test_reach_planner_adapter(kitchen: SceneWorld) -> None:
+    cloud = kitchen.cloud()
+    start = np.array([0.3, 0.6, 1.1])
+    axis = np.array([-1.0, 0.0, 0.0])
+    req = PlanRequest(cloud=cloud, target="bottle1", hand="right", start_position=start, approach_axis=axis)
+    result = ReachModelPlanner().plan(req)
+    bottle = cloud.points[cloud.mask("bottle1")]
+    contact = result.contact_position
+    assert contact[0] == pytest.approx(bottle[:, 0].min() - 0.06, abs=1e-6)
+    np.testing.assert_allclose(result.leave.position[0], contact)
+    np.testing.assert_allclose(result.approach.position[0], start)
+    np.testing.assert_allclose(result.leave.position[-1], start)  # no retreat given: back to the start
+    assert result.approach.duration > 0.5 and result.leave.duration > 0.5
+    with pytest.raises(PlanningError, match="no points in the cloud"):
+        ReachModelPlanner().plan(PlanRequest(cloud=cloud, target="mug2", start_position=start))
+
+
+def test_cloud_obstacles_distance_and_without() -> None:
+    pts = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    field = CloudObstacles(pts, [1, 2], {1: "a", 2: "b"}, surface_offset=0.01)
+    np.testing.assert_allclose(field.distance([[0.0, 0.5, 0.0], [0.9, 0.0, 0.0]]), [0.49, 0.09])
+    assert field.nearest_name([[0.9, 0.0, 0.0]]) == ["b"]
+    np.testing.assert_allclose(field.push_direction([[0.0, 0.0, 0.5]]), [[0.0, 0.0, 1.0]])
+    only_a: Any = field.without(["b"])
+    assert only_a.names == ("a",) and only_a.distance([[0.9, 0.0, 0.0]])[0] == pytest.approx(0.89)
