@@ -22,7 +22,7 @@ from hsi_planning.perception.cloud import LabelledCloud
 from hsi_planning.trajectory import ACTIONS, HANDS, Action, Hand, WristTrajectory
 
 #: Names accepted by :func:`make_planner`.
-PLANNER_NAMES: tuple[str, ...] = ("implicit",)
+PLANNER_NAMES: tuple[str, ...] = ("implicit", "minjerk")
 #: Wrist orientation used when a request gives no start orientation: x forward, z up (identity).
 DEFAULT_START_QUATERNION: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)
 
@@ -181,13 +181,28 @@ class Planner(Protocol):
         ...
 
 
+def default_checkpoint() -> Path:
+    """[path] the shipped implicit-planner checkpoint: ``models/planner.pt`` of the source checkout, else
+    the installed ``share/hsi/models/planner.pt``."""
+    import sys
+
+    candidates = [
+        Path(__file__).resolve().parents[2] / "models" / "planner.pt",
+        Path(sys.prefix) / "share" / "hsi" / "models" / "planner.pt",
+    ]
+    for path in candidates:
+        if path.is_file():
+            return path
+    return candidates[0]
+
+
 def make_planner(name: str, checkpoint: str | Path | None = None, **options: Any) -> Planner:
     """A planner by name.
 
     Args:
-        name: ``"implicit"`` (the neural implicit planner).
-        checkpoint: [path] the implicit planner's checkpoint (default ``models/planner.pt`` under the
-            current directory).
+        name: ``"implicit"`` (the neural implicit planner) or ``"minjerk"`` (the CasADi/IPOPT
+            minimum-jerk baseline).
+        checkpoint: [path] the implicit planner's checkpoint (default: :func:`default_checkpoint`).
         options: overrides of the planner's config fields (e.g. ``fit_steps=20``).
 
     Raises:
@@ -199,7 +214,10 @@ def make_planner(name: str, checkpoint: str | Path | None = None, **options: Any
         from hsi_planning.implicit.planner import ImplicitPlanner, ImplicitPlannerConfig
 
         config = from_mapping(ImplicitPlannerConfig, options, where="implicit planner options")
-        return ImplicitPlanner(
-            Path(checkpoint) if checkpoint is not None else Path("models/planner.pt"), config
-        )
+        return ImplicitPlanner(Path(checkpoint) if checkpoint is not None else default_checkpoint(), config)
+    if name == "minjerk":
+        from hsi_planning.config import from_mapping
+        from hsi_planning.minjerk import MinJerkPlanner, MinJerkPlannerConfig
+
+        return MinJerkPlanner(from_mapping(MinJerkPlannerConfig, options, where="minjerk planner options"))
     raise ConfigError(f"unknown planner {name!r}; available: {list(PLANNER_NAMES)}")

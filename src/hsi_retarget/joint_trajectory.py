@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import json
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -47,6 +50,9 @@ class JointTrajectory:
     joint_names: tuple[str, ...]
     events: tuple[ContactEvent, ...] = ()
     meta: dict[str, Any] = field(default_factory=dict)
+    #: q index of a floating base (x y z qx qy qz qw), -1 if none; ``sample`` re-normalizes its quaternion.
+    #: ``None``: 0 when q has 7 more columns than ``joint_names`` (the root is not among them), else -1.
+    floating_index: int | None = None
 
     def __post_init__(self) -> None:
         t = np.array(self.t, dtype=np.float64, copy=True).reshape(-1)
@@ -65,7 +71,20 @@ class JointTrajectory:
         object.__setattr__(self, "q", q)
         object.__setattr__(self, "joint_names", tuple(self.joint_names))
         object.__setattr__(self, "events", events)
+        floating = self.floating_index
+        if floating is None:
+            floating = 0 if q.shape[1] == len(tuple(self.joint_names)) + 7 else -1
+        object.__setattr__(self, "floating_index", int(floating))
+        if floating >= 0 and floating + 7 > q.shape[1]:
+            raise RetargetError(
+                f"floating_index {self.floating_index} needs 7 entries in q of width {q.shape[1]}"
+            )
         object.__setattr__(self, "meta", dict(self.meta))
+
+    @property
+    def root_index(self) -> int:
+        """q index of the floating base, -1 if none."""
+        return -1 if self.floating_index is None else int(self.floating_index)
 
     @property
     def duration(self) -> float:
@@ -83,7 +102,15 @@ class JointTrajectory:
             return np.array(self.q[-1], dtype=np.float64)
         i = int(np.searchsorted(self.t, time)) - 1
         a = (time - self.t[i]) / (self.t[i + 1] - self.t[i])
-        return np.asarray((1.0 - a) * self.q[i] + a * self.q[i + 1])
+        q0, q1 = self.q[i], np.array(self.q[i + 1])
+        k = self.root_index
+        if k >= 0 and float(q0[k + 3 : k + 7] @ q1[k + 3 : k + 7]) < 0.0:
+            q1[k + 3 : k + 7] *= -1.0  # same hemisphere: interpolate along the short arc
+        out = np.asarray((1.0 - a) * q0 + a * q1, dtype=np.float64)
+        if k >= 0:
+            quat = out[k + 3 : k + 7]
+            out[k + 3 : k + 7] = quat / np.linalg.norm(quat)
+        return out
 
     def velocities(self) -> NDArray[np.float64]:
         """(T, nq) [unit/s] finite-difference rates of ``q`` (for limit checks of actuated joints)."""
@@ -92,14 +119,35 @@ class JointTrajectory:
         return np.asarray(np.gradient(self.q, self.t, axis=0))
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dict."""
+        """JSON-ready dict (``meta`` made JSON-safe: arrays become lists)."""
         return {
             "robot": self.robot,
             "joint_names": list(self.joint_names),
+            "floating_index": self.floating_index,
             "t": self.t.tolist(),
             "q": self.q.tolist(),
-            "events": [e.__dict__ for e in self.events],
+            "events": [dict(e.__dict__) for e in self.events],
+            "meta": plain(self.meta),
         }
+
+    def write_json(self, path: str | Path) -> Path:
+        """Write :meth:`to_dict` as JSON; returns the path."""
+        out = Path(path)
+        out.write_text(json.dumps(self.to_dict()) + "\n", encoding="utf-8")
+        return out
+
+    @classmethod
+    def read_json(cls, path: str | Path) -> JointTrajectory:
+        """Read a file written by :meth:`write_json`."""
+        try:
+            data = json.loads(Path(path).read_text(encoding="utf-8"))
+        except (OSError, json.JSONDecodeError) as exc:
+            raise RetargetError(f"{path}: cannot read a joint trajectory JSON file: {exc}") from exc
+        if not isinstance(data, dict):
+            raise RetargetError(
+                f"{path}: a joint trajectory JSON file holds an object, got {type(data).__name__}"
+            )
+        return cls.from_dict(data)
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> JointTrajectory:
@@ -111,7 +159,25 @@ class JointTrajectory:
                 q=np.asarray(data["q"], dtype=np.float64),
                 joint_names=tuple(data["joint_names"]),
                 events=tuple(ContactEvent(**e) for e in data.get("events", [])),
+                meta=dict(data.get("meta", {})),
+                floating_index=data.get("floating_index"),
             )
-        except (KeyError, TypeError) as exc:
+        except (KeyError, TypeError, ValueError) as exc:
             msg = f"joint trajectory dict is malformed ({exc}); needs robot, t, q, joint_names"
             raise RetargetError(msg) from exc
+
+
+def plain(value: Any) -> Any:
+    """JSON-safe copy of diagnostics: numpy arrays and scalars become lists and Python numbers, non-finite
+    floats become ``None``."""
+    if isinstance(value, Mapping):
+        return {str(k): plain(v) for k, v in value.items()}
+    if isinstance(value, np.ndarray):
+        return plain(value.tolist())
+    if isinstance(value, np.generic):
+        return plain(value.item())
+    if isinstance(value, float):
+        return value if np.isfinite(value) else None
+    if isinstance(value, Sequence) and not isinstance(value, str):
+        return [plain(v) for v in value]
+    return value

@@ -1,11 +1,19 @@
-"""``hsi demo``: the end-to-end demo (foundation version: simulated scene → cloud → bag → files).
+"""``hsi demo``: the simulated bimanual pick-and-place demo from clicked goals.
 
-Steps: build the scene's standalone MJCF (``OUT/<scene>.xml``); run ``launch/sim_world.launch.yaml`` in this
-process on a simulated clock with a recorder attached (bag ``OUT/<scene>.mcap`` → directory
-``OUT/<scene>/``); read the last ``/scene/points`` cloud and the label table back from the bag and write
-``OUT/<scene>_cloud.ply``; render an RGB image of the final simulated state (object poses from the bag's
-last ``/tf``) with the scene's first camera into ``OUT/<scene>.png``; write ``OUT/demo_summary.json``.
-``--test`` is the smallest, fastest variant (used by the tests). It will grow into the pick-and-place demo.
+1. Foundation (:mod:`hsi_nodes.demo.foundation`): ``launch/sim_world.launch.yaml`` runs the scene in
+   MuJoCo with ``scene_cloud_node`` on a simulated clock and a recorder: ``OUT/<scene>.xml``, the bag
+   ``OUT/<scene>.mcap`` (folder ``OUT/<scene>/``), the cloud ``OUT/<scene>_cloud.ply``, a picture
+   ``OUT/<scene>.png`` and ``OUT/demo_summary.json``. The recorded cloud is the scene cloud.
+2. Pick-and-place (:mod:`hsi_nodes.demo.runner`): the scripted clicks of the variant
+   (:mod:`hsi_nodes.demo.tasks`; ``kitchen``: door-cabinet pick-and-place, drawer pick, narrow-shelf pick
+   with a blocker) each go through scheduler + planner -> retargeting -> the MuJoCo check, either as
+   function calls (default) or through the nodes of ``launch/sim_pick_place.launch.yaml`` (``--launch``).
+   Writes ``OUT/report.json`` (one entry per task), ``OUT/report.md``, ``OUT/plots/<task>.png`` and the
+   video ``OUT/demo.mp4``, and prints a summary.
+
+``--test`` is the smallest, fastest variant (one counter task, small images; used by the tests). A task
+that fails (planner error, unreachable goal, collision, missed placement) is reported, and the demo goes
+on; the exit code is 0 when the demo ran (1 on a usage error or a failed foundation launch).
 """
 
 from __future__ import annotations
@@ -13,202 +21,82 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import shutil
 import time
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from hsi_planning.errors import ConfigError
-
-__all__ = ["DemoSettings", "register", "run_demo"]
+__all__ = ["register", "run_demo"]
 
 _log = logging.getLogger(__name__)
 
-_LAUNCH_FILE = "launch/sim_world.launch.yaml"
-_CLOUD_TOPIC = "/scene/points"
-_LABELS_TOPIC = "/scene/labels"
+
+def _config(args: argparse.Namespace) -> Any:
+    from hsi_nodes.demo.pipeline import PipelineConfig
+    from hsi_nodes.demo.runner import RunnerConfig
+    from hsi_retarget.sim_check import VideoConfig
+
+    pipeline = PipelineConfig(robot=args.robot, planner=args.planner, checkpoint=str(args.checkpoint))
+    if args.no_video:
+        video = None
+    elif args.test:
+        video = VideoConfig(width=160, height=120, every=20, fps=10.0, distance=2.4)
+    else:
+        video = VideoConfig(width=320, height=240, every=8, fps=25.0, distance=2.4, azimuth=200.0)
+    return RunnerConfig(pipeline=pipeline, video=video)
 
 
-@dataclass(frozen=True)
-class DemoSettings:
-    """Sizes of one demo run (:meth:`for_run` picks them)."""
-
-    #: Simulated time the launch file runs [s].
-    duration_s: float = 1.0
-    #: Cloud image width; the picture is twice as wide [px].
-    width: int = 320
-    #: Cloud image height; the picture is twice as high [px].
-    height: int = 240
-    #: Voxel edge of the cloud [m].
-    voxel_size: float = 0.01
-
-    def __post_init__(self) -> None:
-        if not 0.0 < self.duration_s <= 60.0:
-            raise ConfigError(
-                f"demo duration must be in (0, 60] [s] of simulated time, got {self.duration_s}"
-            )
-        if self.width < 8 or self.height < 8 or not self.voxel_size > 0.0:
-            raise ConfigError(f"demo images must be >= 8x8 px and voxel_size > 0 m, got {self}")
-
-    @classmethod
-    def for_run(cls, duration_s: float | None, test: bool) -> DemoSettings:
-        """Full size (1 s simulated), or the smallest variant for ``test`` (0.2 s, 160x120 px, 2 cm)."""
-        if test:
-            return cls(0.2 if duration_s is None else duration_s, 160, 120, 0.02)
-        return cls(1.0 if duration_s is None else duration_s)
-
-    @property
-    def cloud_period_s(self) -> float:
-        """Re-render period of the cloud: two clouds after the first [s]."""
-        return self.duration_s / 2.0
-
-
-def _clear_old_bag(bag_dir: Path) -> None:
-    """Delete a bag directory from an earlier demo run (only if it holds nothing but bag files)."""
-    if not bag_dir.exists():
-        return
-    entries = list(bag_dir.iterdir()) if bag_dir.is_dir() else [bag_dir]
-    if not all(p.is_file() and (p.suffix == ".mcap" or p.name == "metadata.yaml") for p in entries):
-        from hsi_planning.errors import TransportError
-
-        raise TransportError(f"{bag_dir} exists and is not a bag of an earlier demo; move or delete it")
-    shutil.rmtree(bag_dir)
-
-
-def _run_launch(scene_file: Path, bag: Path, settings: DemoSettings) -> Any:
-    from hsi_nodes.launch import NodeSpec, package_share, parse_launch_file, run_launch
-
-    overrides = {
-        "scene": str(scene_file),
-        "duration": repr(settings.duration_s),
-        "cloud_period": repr(settings.cloud_period_s),
-        "width": str(settings.width),
-        "height": str(settings.height),
-        "voxel_size": repr(settings.voxel_size),
-    }
-    description = parse_launch_file(package_share() / _LAUNCH_FILE, overrides)
-    recorder = NodeSpec("recorder_node", "recorder", "/", {"out": str(bag)}, source="hsi demo")
-    return run_launch(
-        description, duration_s=settings.duration_s + 0.5, use_sim_time=True, extra_nodes=(recorder,)
-    )
-
-
-def _read_back(bag: Path) -> tuple[list[Any], dict[int, dict[str, Any]], Any]:
-    """(clouds, label table, last TFMessage or None) recorded in ``bag``."""
-    from hsi_nodes.bag import read_bag
-
-    clouds: list[Any] = []
-    table: dict[int, dict[str, Any]] = {}
-    last_tf = None
-    for rec in read_bag(bag, topics={_CLOUD_TOPIC, _LABELS_TOPIC, "/tf"}):
-        if rec.topic == _CLOUD_TOPIC:
-            clouds.append(rec.msg)
-        elif rec.topic == _LABELS_TOPIC:
-            table = {int(k): v for k, v in json.loads(rec.msg.data).items()}
-        else:
-            last_tf = rec.msg
-    return clouds, table, last_tf
-
-
-def _render_picture(mjcf: Path, last_tf: Any, camera: str, size: tuple[int, int], path: Path) -> float:
-    """Render ``camera`` of the MJCF file at the recorded object poses to ``path``; returns pixel std."""
-    import imageio.v3 as iio
-    import numpy as np
-
-    from hsi_planning.gl import ensure_headless_gl
-
-    ensure_headless_gl()
-    import mujoco
-
-    from hsi_planning.perception import CloudRenderer
-
-    model = mujoco.MjModel.from_xml_path(str(mjcf))
-    data = mujoco.MjData(model)
-    for tf in [] if last_tf is None else last_tf.transforms:
-        jid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, tf.child_frame_id)
-        if jid >= 0 and model.jnt_type[jid] == mujoco.mjtJoint.mjJNT_FREE:
-            t, r = tf.transform.translation, tf.transform.rotation
-            adr = int(model.jnt_qposadr[jid])
-            data.qpos[adr : adr + 7] = [t.x, t.y, t.z, r.w, r.x, r.y, r.z]
-    mujoco.mj_forward(model, data)
-    with CloudRenderer(model) as renderer:
-        image = renderer.render_rgb(data, camera, *size)
-    iio.imwrite(path, image)
-    return float(np.asarray(image, dtype=np.float64).std())
-
-
-def run_demo(scene: str, out: Path, settings: DemoSettings) -> dict[str, Any]:
-    """Run the foundation demo for ``scene`` into folder ``out``; returns the summary (also written as JSON).
-
-    Raises:
-        HsiError: unknown scene, a bag directory that cannot be replaced, or no cloud recorded.
-    """
-    import numpy as np
-
-    from hsi_nodes.bag import bag_paths, bag_topics
-    from hsi_nodes.cli.scene_cloud import format_label_counts
-    from hsi_nodes.pointcloud2 import msg_to_cloud
-    from hsi_planning.errors import CloudError
-    from hsi_planning.perception import LabelledCloud, write_ply
-    from hsi_planning.scene import write_mjcf
-    from hsi_planning.scene_paths import load_scene, resolve_scene
+def run_demo(args: argparse.Namespace) -> dict[str, Any]:
+    """Run the whole demo for parsed ``args``; returns the summary (also in ``OUT/demo_summary.json``)."""
+    from hsi_nodes.demo.foundation import DemoSettings, run_foundation
+    from hsi_nodes.demo.runner import run_tasks
+    from hsi_nodes.demo.summary import format_summary, write_summary
+    from hsi_nodes.demo.tasks import demo_tasks
 
     t0 = time.perf_counter()
-    scene_file = resolve_scene(scene)
-    spec = load_scene(scene_file)
-    if not spec.cameras:
-        raise CloudError(f"scene {spec.name!r} has no cameras; the demo renders its cloud from them")
-    out.mkdir(parents=True, exist_ok=True)
-    mjcf = write_mjcf(spec, out / f"{spec.name}.xml")
-    bag = out / f"{spec.name}.mcap"
-    bag_dir, mcap_file = bag_paths(bag)
-    _clear_old_bag(bag_dir)
-    launch = _run_launch(scene_file, bag, settings)
-    clouds, table, last_tf = _read_back(bag)
-    if not clouds:
-        raise CloudError(
-            f"no {_CLOUD_TOPIC} message in {mcap_file}; the launch summary was:\n{launch.format()}"
-        )
-    points, labels, _ = msg_to_cloud(clouds[-1])
-    assert labels is not None  # scene_cloud_node always sends labels
-    names = {i: str(v["name"]) for i, v in table.items()}
-    classes = {i: str(v["semantic_class"]) for i, v in table.items()}
-    ply = write_ply(out / f"{spec.name}_cloud.ply", LabelledCloud(points, labels, names, classes))
-    png = out / f"{spec.name}.png"
-    size = (2 * settings.width, 2 * settings.height)
-    pixel_std = _render_picture(mjcf, last_tf, spec.cameras[0].name, size, png)
-    ids, counts = np.unique(labels, return_counts=True)
-    summary: dict[str, Any] = {
-        "scene": spec.name,
-        "scene_file": str(scene_file),
-        "files": {"mjcf": str(mjcf), "bag": str(mcap_file), "cloud_ply": str(ply), "image": str(png)},
-        "simulated_s": round(launch.duration_s, 6),
-        "launch_wall_s": round(launch.wall_s, 3),
-        "stop_reason": launch.stop_reason,
-        "callback_errors": launch.callback_errors,
-        "clouds": {"count": len(clouds), "points": [int(c.width) * int(c.height) for c in clouds]},
-        "labels": {
-            str(int(i)): {"name": names.get(int(i), "?"), "points": int(c)}
-            for i, c in zip(ids, counts, strict=True)
-        },
-        "label_table_size": len(table),
-        "topics": {t: {"type": ty, "count": n} for t, (ty, n) in sorted(bag_topics(bag).items())},
-        "image": {"camera": spec.cameras[0].name, "size": list(size), "pixel_std": round(pixel_std, 3)},
-        "wall_s": round(time.perf_counter() - t0, 3),
+    out: Path = args.out
+    variant = args.variant or ("test" if args.test else "kitchen")
+    tasks = demo_tasks(variant, tuple(t for t in (args.tasks or "").split(",") if t))
+    config = _config(args)  # validate robot and planner before the foundation runs
+    settings = DemoSettings.for_run(args.duration, args.test)
+    summary, cloud = run_foundation(args.scene, out, settings, echo=print)
+    if args.launch:
+        from hsi_nodes.demo.launch_path import run_launch_tasks
+
+        run = run_launch_tasks(tasks, out, config, echo=print)
+    else:
+        run = run_tasks(tasks, out, config, {summary["scene"]: cloud}, echo=print)
+    wall = time.perf_counter() - t0
+    files = {"report_json": str(out / "report.json"), "report_md": str(out / "report.md")}
+    files |= {f"plot_{p.stem}": str(p) for p in run.plots}
+    if run.video is not None:
+        files["video"] = str(run.video)
+    info = {
+        "robot": config.pipeline.robot,
+        "planner": config.pipeline.planner,
+        "variant": variant,
+        "path": "launch" if args.launch else "pipeline",
+        "wall_s": wall,
+        "files": files,
     }
+    json_path, md_path = write_summary(run.outcomes, out, info)
+    summary["pick_place"] = {
+        **info,
+        "tasks_wall_s": round(run.wall_s, 3),
+        "wall_s": round(wall, 3),
+        "succeeded": sum(o.report.success for o in run.outcomes),
+        "tasks": [
+            {"task": o.task.name, "success": o.report.success, "stage": o.stage} for o in run.outcomes
+        ],
+    }
+    summary["files"].update(files)
     (out / "demo_summary.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
-    print(launch.format())
-    print(f"last cloud: {len(points)} points")
-    print("\n".join(format_label_counts(labels, names)))
-    print(
-        f"wrote {mjcf}, {mcap_file}, {ply}, {png}, {out / 'demo_summary.json'} in {summary['wall_s']:.1f} s"
-    )
+    print(format_summary(run.outcomes, info))
+    print(f"wrote {json_path}, {md_path}, {len(run.plots)} plots, {run.video}; demo wall time {wall:.1f} s")
     return summary
 
 
 def _run(args: argparse.Namespace) -> int:
-    summary = run_demo(args.scene, args.out, DemoSettings.for_run(args.duration, args.test))
+    summary = run_demo(args)
     return 1 if summary["callback_errors"] else 0
 
 
@@ -216,21 +104,34 @@ def register(sub: Any) -> None:
     """Add the ``demo`` sub-command."""
     parser = sub.add_parser(
         "demo",
-        help="end-to-end demo (foundation: simulated scene, labelled cloud, bag, picture)",
+        help="simulated pick-and-place demo from scripted clicks (reports, plots, video in OUT)",
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
-        epilog="example: hsi demo --scene kitchen --out out --duration 1.0",
+        epilog="examples: hsi demo --out out | hsi demo --robot humanoid --planner minjerk | hsi demo --test",
     )
     parser.add_argument(
-        "--scene", default="kitchen", help="built-in scene name or spec path (default kitchen)"
+        "--scene", default="kitchen", help="scene of the foundation run (built-in name or spec path)"
     )
     parser.add_argument("--out", type=Path, default=Path("out"), help="output folder (default out/)")
+    parser.add_argument(
+        "--robot", default="dual_ur5e", help="dual_ur5e (alias dual_arm, default) or humanoid"
+    )
+    parser.add_argument(
+        "--planner", default="implicit", help="implicit (default), minjerk, reach_model or linear"
+    )
+    parser.add_argument(
+        "--checkpoint", type=Path, default=Path("models/planner.pt"), help="implicit planner checkpoint"
+    )
+    parser.add_argument("--variant", default="", help="task list: kitchen (default) or test (with --test)")
+    parser.add_argument("--tasks", default="", metavar="A,B", help="run only these tasks (by name)")
     parser.add_argument(
         "--duration",
         type=float,
         default=None,
         metavar="S",
-        help="simulated time [s] (default 1.0; 0.2 with --test)",
+        help="simulated time of the foundation run [s] (default 1.0; 0.2 with --test)",
     )
+    parser.add_argument("--launch", action="store_true", help="run the tasks through the node launch file")
+    parser.add_argument("--no-video", action="store_true", help="skip the video")
     parser.add_argument("--test", action="store_true", help="smallest, fastest variant (for the tests)")
     parser.set_defaults(func=_run)

@@ -23,6 +23,8 @@ NODE_EXECUTABLES: dict[str, str] = {
     "sim_node": "hsi_nodes.nodes.sim_node:SimNode",
     "scene_cloud_node": "hsi_nodes.nodes.scene_cloud_node:SceneCloudNode",
     "scheduler_node": "hsi_nodes.nodes.scheduler_node:SchedulerNode",
+    "planner_node": "hsi_nodes.nodes.planner_node:PlannerNode",
+    "retarget_node": "hsi_nodes.nodes.retarget_node:RetargetNode",
 }
 
 

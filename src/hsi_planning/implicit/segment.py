@@ -1,0 +1,233 @@
+"""One segment (approach or leave) of the implicit planner: latent fit, remaining-time field, descent.
+
+Everything here works in *approach order*: the path runs from a free anchor (the wrist for an approach,
+the retreat point for a leave) **to the contact**, and φ̂ is the time-distance to the contact (remaining
+time for an approach, time since the contact for a leave; the planner reverses a leave at the end).
+See :mod:`hsi_planning.implicit.planner` for the pipeline.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from hsi_planning.errors import PlanningError
+from hsi_planning.fields.descent import DescentConfig, descend_field, descent_potential
+from hsi_planning.implicit.path import (
+    arc_length,
+    required_clearance,
+    resample_uniform,
+    select_start,
+    smooth_path,
+    time_path,
+)
+from hsi_planning.implicit.prior import transfer_orientation
+from hsi_planning.implicit.runtime_field import SegmentContext, repair_field, wrist_free
+from hsi_planning.trajectory import WristTrajectory
+
+__all__ = ["SegmentContext", "SegmentPlan", "plan_segment"]
+
+F64 = NDArray[np.float64]
+
+
+@dataclass(frozen=True, eq=False)
+class SegmentPlan:
+    """A planned segment in approach order (last sample = contact).
+
+    Attributes:
+        t: (T,) [s] sample times from 0; position: (T, 3) [m]; quaternion: (T, 4) [x y z w].
+        info: plain diagnostics (start point, repair used, clearance margin [m], fit loss).
+        timings: [s] per stage.
+    """
+
+    t: F64
+    position: F64
+    quaternion: F64
+    info: dict[str, Any] = field(default_factory=dict)
+    timings: dict[str, float] = field(default_factory=dict)
+
+
+def _violation(positions: F64, ctx: SegmentContext, carrying: bool) -> tuple[float, str]:
+    """(worst clearance − required [m] along a path in approach order (< 0: too close), where)."""
+    cfg = ctx.config
+    from_contact = arc_length(positions[::-1])[::-1]
+    full = cfg.hand_radius + cfg.check_margin
+    need = required_clearance(from_contact, full, ctx.contact_clear, cfg.clearance_relax)
+    margins = ctx.clearance(positions) - need
+    what = "the hand"
+    if carrying:  # the held object: free of the support once lifted, then keeping check_margin
+        after = np.clip((from_contact - ctx.lift) / cfg.clearance_relax, 0.0, 1.0)
+        obj = ctx.carried_clearance(positions) - cfg.check_margin * (0.5 + 0.5 * after)
+        lifting = from_contact <= ctx.lift + 0.005  # leaving the support: only the upper part can hit
+        obj[lifting] = ctx.carried_clearance(positions[lifting], upper=True)
+        if obj.min() < margins.min():
+            margins, what = obj, "the carried object"
+    i = int(np.argmin(margins))
+    where = f"{what} at {positions[i].round(3).tolist()} [m], {from_contact[i]:.2f} m from the contact"
+    return float(margins[i]), where
+
+
+def _connect_clear(
+    ctx: SegmentContext, anchor: F64, carrying: bool, margin: float
+) -> Callable[[F64], NDArray[np.bool_]]:
+    radius = ctx.config.hand_radius + margin
+
+    def clear(x: F64) -> NDArray[np.bool_]:
+        ok = ctx.clearance.segments_clear(anchor, x, radius)
+        if carrying:
+            corners = np.array([[a, b, c] for a in (0, 1) for b in (0, 1) for c in (0, 1)])
+            box = np.where(corners, ctx.carried.max(axis=0), ctx.carried.min(axis=0))
+            for corner in box:
+                if ok.any():
+                    ok[ok] = ctx.clearance.segments_clear(anchor + corner, x[ok] + corner, margin)
+        return ok
+
+    return clear
+
+
+def _field_speed(grid: Any, phi: F64, far: float, points: F64) -> F64:
+    """(N,) [m/s] speed 1/|∇φ| of a time field at ``points`` (N, 3) inside the grid."""
+    grad = grid.gradient(descent_potential(phi, far))
+    g = np.linalg.norm(grid.interpolate_gradient(grad, points), axis=1)
+    return np.asarray(1.0 / np.maximum(g, 1e-6), dtype=np.float64)
+
+
+def _descend(
+    phi: F64,
+    ctx: SegmentContext,
+    anchor: F64,
+    prior: WristTrajectory,
+    *,
+    free: NDArray[np.bool_],
+    margin: float,
+    connect: bool,
+    finish: Callable[[], F64] | None = None,
+) -> tuple[F64, F64, float]:
+    """(path in approach order, speeds [m/s], length [m] descended on ``phi``) from Eq. 11's start point
+    down ∇φ to the contact. Where the descent stalls (a local minimum), it continues on ``finish()``
+    (the repaired field) when given. With ``connect`` the path starts at ``anchor`` (straight, clear
+    connection), else at the start point."""
+    cfg, fs = ctx.config, ctx.fields
+    grid, far = fs.grid, fs.config.unreachable_time
+    flat = phi.reshape(-1)
+    cap = cfg.phi_cap_factor * max(prior.duration, 0.2)
+    cand = np.flatnonzero((flat < min(cap, far)) & free.reshape(-1))
+    points = grid.points()
+    mean_speed = prior.path_length() / max(prior.duration, 1e-6)
+    lift = ctx.lift
+    clear = _connect_clear(ctx, anchor, lift > 0.0, margin) if connect else lambda x: np.ones(len(x), bool)
+    start = points[cand[select_start(points[cand], flat[cand], anchor, mean_speed, clear)]]
+    descent = DescentConfig(
+        step=cfg.descent_step, stop_radius=max(lift, cfg.descent_step), max_steps=cfg.max_descent_steps
+    )
+    desc = descend_field(grid, phi, start, ctx.contact, blocked_value=far, config=descent)
+    parts = [(phi, desc.positions)]
+    if not desc.reached and finish is not None:
+        rest = descend_field(
+            grid, finish(), desc.positions[-1], ctx.contact, blocked_value=far, config=descent
+        )
+        parts.append((finish(), rest.positions[1:]))
+        desc = rest
+    if not desc.reached:
+        raise PlanningError(
+            f"descent from {start.round(3).tolist()} stopped "
+            f"{np.linalg.norm(desc.positions[-1] - ctx.contact):.3f} m before the contact "
+            "(local minimum of the remaining-time field)"
+        )
+    tail = [ctx.contact + np.array([0.0, 0.0, lift])] if lift > 0.0 else []
+    head = [anchor[None]] if connect else []
+    path = np.vstack([*head, *(p for _, p in parts), *tail, ctx.contact[None]])
+    speeds = [np.full(len(head), mean_speed)]
+    speeds += [_field_speed(grid, f, far, p) for f, p in parts]
+    speeds.append(np.full(len(tail) + 1, cfg.min_speed))
+    learned_length = float(arc_length(parts[0][1])[-1]) if len(parts[0][1]) > 1 else 0.0
+    return path, np.concatenate(speeds), learned_length
+
+
+def plan_segment(
+    phi: F64,
+    ctx: SegmentContext,
+    anchor: F64,
+    prior: WristTrajectory,
+    *,
+    carrying: bool,
+    connect: bool = True,
+) -> SegmentPlan:
+    """Start point, descent, shaping, timing and orientation of one segment.
+
+    ``anchor`` (3,) [m] is the free wrist pose of Eq. 11 (the wrist for an approach, the retreat target
+    for a leave); with ``connect`` the path is joined to it by a straight, clear segment, else it ends
+    (approach order: starts) at the selected start point x_s.
+
+    Tried in order until the path keeps its clearance: the learned field, then (``repair`` =
+    ``fallback``) the repaired field with ``repair_retries`` growing safety margins.
+    """
+    cfg = ctx.config
+    t0 = time.perf_counter()
+    margins = [cfg.clearance_margin + k * cfg.repair_margin_step for k in range(cfg.repair_retries + 1)]
+    attempts = {
+        "never": [("learned", margins[0])],
+        "fallback": [("learned", margins[0]), *(("repaired", m) for m in margins)],
+        "always": [("repaired", m) for m in margins],
+    }[cfg.repair]
+    error: PlanningError | None = None
+    failures: list[str] = []
+    lifted = dataclasses.replace(ctx, lift=ctx.lift if carrying else 0.0)
+    free_at = wrist_free(lifted, carrying=carrying)
+    for kind, margin in attempts:
+        free = free_at(margin)
+        repaired = functools.cache(lambda free=free: repair_field(phi, lifted, free))
+        try:
+            field_used = phi if kind == "learned" else repaired()
+            finish = repaired if kind == "learned" and cfg.repair != "never" else None
+            raw, speed, learned_length = _descend(
+                field_used, lifted, anchor, prior, free=free, margin=margin, connect=connect, finish=finish
+            )
+        except PlanningError as exc:
+            error = exc
+            failures.append(f"{kind} (margin {margin:.3f} m): {exc}")
+            continue
+        if kind == "repaired":
+            learned_length = 0.0
+        path = smooth_path(raw, cfg.path_smoothing, cfg.path_step)
+        arc_raw, arc_new = arc_length(raw), arc_length(path)
+        v = np.interp(arc_new / arc_new[-1], arc_raw / arc_raw[-1], speed)
+        t = time_path(
+            path,
+            v,
+            max_speed=cfg.max_speed,
+            min_speed=cfg.min_speed,
+            max_accel=cfg.max_accel,
+            smooth=cfg.speed_smoothing,
+        )
+        tt, pos = resample_uniform(t, path, cfg.sample_rate)
+        clear, where = _violation(pos, lifted, carrying)
+        if clear < 0.0:
+            error = PlanningError(
+                f"no collision-free path: the {kind} one brings {where} "
+                f"{-clear:.3f} m too close to an obstacle"
+            )
+            failures.append(f"{kind} (margin {margin:.3f} m): {error}")
+            continue
+        pp = prior.position if prior.segment == "approach" else prior.position[::-1]
+        pq = prior.quaternion if prior.segment == "approach" else prior.quaternion[::-1]
+        quat = transfer_orientation(pp, pq, pos, cfg.blend_fraction)
+        share = learned_length / max(float(arc_length(raw)[-1]), 1e-9)
+        info = {
+            "field": "hybrid" if kind == "learned" and share < 0.999 else kind,
+            "learned_share": share,
+            "margin": margin,
+            "clearance_margin": clear,
+            "length": float(arc_new[-1]),
+            "failed_attempts": failures,
+        }
+        return SegmentPlan(tt, pos, quat, info, {"path": time.perf_counter() - t0})
+    assert error is not None
+    raise PlanningError("no collision-free path; tried " + "; ".join(failures)) from error

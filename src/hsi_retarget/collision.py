@@ -1,0 +1,286 @@
+"""Collision geometry for the IK margins: spheres on the robot's links, a distance query to the scene, and
+the linearized distance constraints of the closest sphere pairs (:func:`collision_rows`).
+
+Spheres are derived from the robot description's collision primitives: for each arm, every link from the
+elbow joint's link outwards (forearm, wrist, gripper body, and the fingers as *tip* spheres, which get a
+smaller scene margin since they must get close to what they grasp), and for the body the links that carry
+the arms (torso, pelvis/base) with their fixed children (head). A capsule/cylinder becomes spheres of its
+radius along its axis, a box spheres of its smallest half extent over its two larger axes (a finger box:
+spheres of its middle half extent along its longest axis). Distances to the scene come from an Open3D
+``RaycastingScene`` of the scene's world-frame meshes (closest point; negative when the point lies clearly
+behind the closest triangle, i.e. inside a closed mesh).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+
+import numpy as np
+import open3d as o3d
+import pinocchio as pin
+import trimesh
+from numpy.typing import NDArray
+
+from hsi_planning.errors import RetargetError
+from hsi_retarget.robots import Geom, RobotModel
+
+F64 = NDArray[np.float64]
+I64 = NDArray[np.int64]
+GROUPS = ("left", "right", "body")  #: sphere groups (index = group code)
+
+
+@dataclass(frozen=True, eq=False)
+class SphereSet:
+    """Spheres fixed to robot frames.
+
+    Attributes:
+        frame_ids: (S,) pinocchio frame index of the link each sphere is fixed to.
+        frames: (S,) the link names.
+        centers: (S, 3) [m] sphere centres in their link frames.
+        radii: (S,) [m].
+        groups: (S,) group code, index into :data:`GROUPS`.
+        tips: (S,) True for finger spheres.
+    """
+
+    frame_ids: I64
+    frames: tuple[str, ...]
+    centers: F64
+    radii: F64
+    groups: I64
+    tips: NDArray[np.bool_]
+
+    def of(self, group: str) -> I64:
+        """Indices of the spheres of ``group`` (``left``, ``right`` or ``body``)."""
+        return np.flatnonzero(self.groups == GROUPS.index(group)).astype(np.int64)
+
+    def world(self, data: pin.Data) -> F64:
+        """(S, 3) [m] sphere centres in the world; needs ``data.oMf`` up to date."""
+        rot = np.empty((self.radii.shape[0], 3, 3))
+        pos = np.empty((self.radii.shape[0], 3))
+        for fid in np.unique(self.frame_ids):
+            placement = data.oMf[int(fid)]
+            sel = self.frame_ids == fid
+            rot[sel], pos[sel] = placement.rotation, placement.translation
+        return np.asarray(np.einsum("sij,sj->si", rot, self.centers) + pos)
+
+    def pairs(self) -> I64:
+        """(P, 2) sphere index pairs checked for self-collision: left arm vs right arm, each arm vs body."""
+        left, right, body = self.of("left"), self.of("right"), self.of("body")
+        blocks = [
+            np.array(np.meshgrid(a, b, indexing="ij")).reshape(2, -1).T
+            for a, b in ((left, right), (left, body), (right, body))
+        ]
+        return np.concatenate(blocks).astype(np.int64) if blocks else np.zeros((0, 2), dtype=np.int64)
+
+
+def _geom_spheres(geom: Geom, max_per_axis: int, finger: bool = False) -> list[tuple[F64, float]]:
+    """(centre (3,) in the link frame [m], radius [m]) covering one primitive."""
+    pose = np.asarray(geom.pose, dtype=np.float64)
+    if finger and geom.kind == "box":
+        half_ext = np.asarray(geom.size, dtype=np.float64)
+        order = np.argsort(half_ext)
+        radius, half = float(half_ext[order[1]]), float(half_ext[order[2]])
+        n = min(max_per_axis, max(1, math.ceil(half / radius)))
+        axis = np.eye(3)[order[2]]
+        spots = np.linspace(-(half - radius), half - radius, n) if n > 1 else np.zeros(1)
+        return [(pose[:3, :3] @ (u * axis) + pose[:3, 3], radius) for u in spots]
+    if geom.kind == "sphere":
+        return [(pose[:3, 3].copy(), float(geom.size[0]))]
+    if geom.kind in ("capsule", "cylinder"):
+        radius, half = float(geom.size[0]), float(geom.size[1])
+        n = min(max_per_axis, max(2, math.ceil(2.0 * half / radius) + 1))
+        return [
+            (pose[:3, :3] @ np.array([0.0, 0.0, u]) + pose[:3, 3], radius)
+            for u in np.linspace(-half, half, n)
+        ]
+    half_ext = np.asarray(geom.size, dtype=np.float64)
+    thin = int(np.argmin(half_ext))
+    radius = float(half_ext[thin])
+    axes = [a for a in range(3) if a != thin]
+    grids = []
+    for a in axes:
+        n = min(max_per_axis, max(1, math.ceil(half_ext[a] / radius)))
+        grids.append(np.linspace(-(half_ext[a] - radius), half_ext[a] - radius, n) if n > 1 else np.zeros(1))
+    out = []
+    for u in grids[0]:
+        for v in grids[1]:
+            local = np.zeros(3)
+            local[axes[0]], local[axes[1]] = u, v
+            out.append((pose[:3, :3] @ local + pose[:3, 3], radius))
+    return out
+
+
+def robot_spheres(robot: RobotModel, max_per_axis: int = 6) -> SphereSet:
+    """The collision spheres of ``robot`` (see the module docstring for which links get them)."""
+    desc = robot.description
+    links = {link.name: link for link in desc.links}
+    finger_joints = {j for side in robot.gripper_joints.values() for j in side}
+    owner = {j.name: link.name for link in desc.links for j in link.joints}
+    selected: list[tuple[str, str]] = []  # (link, group)
+    arm_roots: set[str] = set()
+    for side in ("left", "right"):
+        joints = robot.arm_joints[side]
+        elbow = next((j for j in joints if "elbow" in j), joints[len(joints) // 2])
+        start = owner[elbow]
+        arm_roots.add(str(links[owner[joints[0]]].parent))
+        chain = {start}
+        for link in desc.links:  # parents come first: one pass collects the subtree
+            if link.parent in chain:
+                chain.add(link.name)
+        selected += [(n, side) for n in sorted(chain)]
+    carriers: set[str] = set()
+    for root in arm_roots:
+        name: str | None = root
+        while name is not None and links[name].group != "body":  # up to the arm's body carrier
+            name = links[name].parent
+        while name is not None and links[name].group == "body":
+            carriers.add(name)
+            name = links[name].parent
+    carriers |= {
+        link.name
+        for link in desc.links
+        if link.parent in carriers and not link.joints and link.group == "body"
+    }
+    selected += [(n, "body") for n in sorted(carriers)]
+    frame_ids, frames, centers, radii, groups, tips = [], [], [], [], [], []
+    for name, group in selected:
+        finger = any(j.name in finger_joints for j in links[name].joints)
+        for geom in links[name].geoms:
+            for centre, radius in _geom_spheres(geom, max_per_axis, finger):
+                tips.append(finger)
+                frame_ids.append(robot.model.getFrameId(name, pin.FrameType.BODY))
+                frames.append(name)
+                centers.append(centre)
+                radii.append(radius)
+                groups.append(GROUPS.index(group))
+    if not radii:
+        raise RetargetError(f"robot {robot.name}: no collision primitives on the arm links")
+    return SphereSet(
+        np.array(frame_ids, dtype=np.int64),
+        tuple(frames),
+        np.array(centers, dtype=np.float64),
+        np.array(radii, dtype=np.float64),
+        np.array(groups, dtype=np.int64),
+        np.array(tips, dtype=bool),
+    )
+
+
+class SceneDistance:
+    """Signed distance [m] from points to a set of world-frame triangle meshes (Open3D raycasting scene)."""
+
+    def __init__(self, meshes: Mapping[str, trimesh.Trimesh], exclude: Iterable[str] = ()) -> None:
+        """Index ``meshes`` (name -> world-frame mesh) except those named in ``exclude`` or below them
+        (``cabinet1`` also drops ``cabinet1/door1``).
+
+        Raises:
+            RetargetError: nothing left to index.
+        """
+        drop = tuple(exclude)
+        kept = {n: m for n, m in meshes.items() if not any(n == d or n.startswith(d + "/") for d in drop)}
+        if not kept:
+            raise RetargetError(f"no scene mesh left after excluding {list(drop)}")
+        self.names: tuple[str, ...] = tuple(kept)
+        self._scene = o3d.t.geometry.RaycastingScene()
+        for mesh in kept.values():
+            self._scene.add_triangles(
+                o3d.core.Tensor.from_numpy(np.ascontiguousarray(mesh.vertices, dtype=np.float32)),
+                o3d.core.Tensor.from_numpy(np.ascontiguousarray(mesh.faces, dtype=np.uint32)),
+            )
+
+    @classmethod
+    def from_spec(cls, spec: object, exclude: Iterable[str] = ()) -> SceneDistance:
+        """From a scene spec (:func:`hsi_planning.scene.scene_meshes`)."""
+        from hsi_planning.scene import scene_meshes
+
+        return cls(scene_meshes(spec), exclude)  # type: ignore[arg-type]
+
+    def query(self, points: F64) -> tuple[F64, F64]:
+        """Distances (N,) [m] (negative inside a closed mesh) and unit gradients (N, 3) (the direction that
+        increases the distance) of ``points`` (N, 3) [m]."""
+        pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        if pts.shape[0] == 0:
+            return np.zeros(0), np.zeros((0, 3))
+        ans = self._scene.compute_closest_points(
+            o3d.core.Tensor.from_numpy(np.ascontiguousarray(pts, dtype=np.float32))
+        )
+        closest = ans["points"].numpy().astype(np.float64)
+        tri_normal = ans["primitive_normals"].numpy().astype(np.float64)
+        delta = pts - closest
+        dist = np.linalg.norm(delta, axis=1)
+        # inside: the point lies behind the closest triangle's plane (a point outside next to an edge can get
+        # the other face's triangle, with a slightly negative dot product: not inside)
+        side = np.where(np.einsum("ij,ij->i", delta, tri_normal) < -0.5 * dist, -1.0, 1.0)
+        direction = np.where(dist[:, None] > 1e-9, delta / np.maximum(dist, 1e-12)[:, None], tri_normal)
+        return side * dist, direction * side[:, None]
+
+
+def collision_rows(
+    model: pin.Model,
+    data: pin.Data,
+    spheres: SphereSet,
+    pairs: I64,
+    scene: SceneDistance | None,
+    *,
+    margins: tuple[float, float, float],
+    activation: float,
+    gain: float,
+    max_rows: int,
+) -> tuple[F64, F64, float]:
+    """Linearized clearance constraints ``A dq >= lower`` for one IK step.
+
+    ``data`` must hold the frame placements and joint Jacobians of the step's configuration. Every sphere
+    near the scene and every pair of ``pairs`` (P, 2) closer than ``activation`` [m] beyond its margin
+    (``margins`` = scene, finger tip, self [m]) is a candidate; the ``max_rows`` closest get a row
+    ``n^T (J_a - J_b) dq >= -gain (d - margin)`` (a velocity damper: one step closes at most ``gain`` of the
+    gap). Returns A (k, nv), lower (k,) and the smallest gap [m] (``inf`` without candidates).
+    """
+    scene_margin, tip_margin, self_margin = margins
+    centers = spheres.world(data)
+    first, second, slacks, directions = [], [], [], []  # sphere pairs (second -1: the scene)
+    if scene is not None:
+        dist, normal = scene.query(centers)
+        slack = dist - spheres.radii - np.where(spheres.tips, tip_margin, scene_margin)
+        near = np.flatnonzero(slack < activation)
+        first.append(near)
+        second.append(np.full(near.shape, -1))
+        slacks.append(slack[near])
+        directions.append(normal[near])
+    if pairs.shape[0]:
+        a, b = pairs[:, 0], pairs[:, 1]
+        delta = centers[a] - centers[b]
+        norm = np.linalg.norm(delta, axis=1)
+        slack = norm - spheres.radii[a] - spheres.radii[b] - self_margin
+        near = np.flatnonzero(slack < activation)
+        first.append(a[near])
+        second.append(b[near])
+        slacks.append(slack[near])
+        directions.append(delta[near] / np.maximum(norm[near], 1e-9)[:, None])
+    gaps = np.concatenate(slacks) if slacks else np.zeros(0)
+    if gaps.size == 0:
+        return np.zeros((0, model.nv)), np.zeros(0), math.inf
+    order = np.argsort(gaps)[:max_rows]
+    ia, ib = np.concatenate(first)[order], np.concatenate(second)[order]
+    dirs = np.concatenate(directions)[order]
+    rows = _point_rows(model, data, spheres, centers, idx=ia, dirs=dirs)
+    rows -= _point_rows(model, data, spheres, centers, idx=ib, dirs=dirs)
+    return rows, -gain * gaps[order], float(gaps[order[0]])
+
+
+def _point_rows(
+    model: pin.Model, data: pin.Data, spheres: SphereSet, centers: F64, *, idx: I64, dirs: F64
+) -> F64:
+    """Rows (k, nv): ``dirs[k]`` (3,) times the point Jacobian of sphere ``idx[k]`` (zero where -1)."""
+    rows = np.zeros((idx.shape[0], model.nv))
+    used = idx >= 0
+    if not used.any():
+        return rows
+    unique, inverse = np.unique(spheres.frame_ids[idx[used]], return_inverse=True)
+    frame = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+    jac = np.stack([np.asarray(pin.getFrameJacobian(model, data, int(f), frame)) for f in unique])[inverse]
+    origin = np.stack([np.asarray(data.oMf[int(f)].translation) for f in unique])[inverse]
+    d = dirs[used]
+    lever = np.cross(d, centers[idx[used]] - origin)  # d . (w x r) = -(d x r) . w
+    rows[used] = np.einsum("kj,kjn->kn", d, jac[:, :3]) - np.einsum("kj,kjn->kn", lever, jac[:, 3:])
+    return rows

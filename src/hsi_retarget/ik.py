@@ -1,0 +1,356 @@
+"""Per-frame differential inverse kinematics as a small dense QP (CasADi ``conic`` with DAQP).
+
+One step solves, for the joint step ``dq`` (tangent space, the gripper fingers excluded)::
+
+    min  sum_k w_k |J_k dq - e_k|^2 + w_post |dq - (q_post - q)|^2 + damping |dq|^2
+    s.t. max(q_lower - q, -s) <= dq <= min(q_upper - q, s)       s = min(max_step, v_max dt)
+         n_i^T J_i dq >= -gain (d_i - margin)                    sphere i near the scene / the other arm
+         (humanoid) J_sole dq = e_sole, CoM inside the support polygon  (:mod:`hsi_retarget.humanoid_ik`)
+
+with the tasks: both TCP poses (position weight >> orientation weight), the root goal (dual arm: planar
+base x, y, yaw; humanoid: pelvis pose) and the torso lift. Position limits are velocity bounds, so a step
+never leaves the limits. When the constrained QP is infeasible (e.g. a step starting inside a margin), it
+is retried with the inequality rows relaxed to "do not get closer", then with them dropped (counted in
+:attr:`StepInfo.fallback`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+import pinocchio as pin
+from numpy.typing import NDArray
+
+from hsi_planning.errors import ConfigError, RetargetError
+from hsi_retarget.collision import SceneDistance, collision_rows, robot_spheres
+from hsi_retarget.humanoid_ik import SupportConfig, support_rows
+from hsi_retarget.mapping import BASE_JOINTS, LIFT_JOINT
+from hsi_retarget.robots import RobotModel
+
+F64 = NDArray[np.float64]
+_LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+
+
+@dataclass(frozen=True)
+class IKConfig:
+    """Weights, limits and margins of :class:`IKSolver`."""
+
+    position_weight: float = 1.0  #: [1/m^2] TCP position task
+    orientation_weight: float = 0.01  #: [1/rad^2] TCP orientation task (position weight >> this)
+    root_weight: float = 1.0  #: [1/m^2 or 1/rad^2] base / pelvis goal task
+    lift_weight: float = 0.05  #: [1/m^2] torso lift goal task
+    posture_weight: float = 1e-3  #: [1/rad^2] pull of the arm (and waist/leg) joints to the posture
+    damping: float = 1e-4  #: [1/rad^2] Levenberg-Marquardt damping of every step
+    max_step: float = 0.05  #: [rad] or [m] largest change of one joint in one step (trust region)
+    iterations: int = 200  #: [-] step limit of :meth:`IKSolver.solve`
+    position_tolerance: float = 1e-4  #: [m] convergence of :meth:`IKSolver.solve`
+    orientation_tolerance: float = 1e-3  #: [rad] convergence of :meth:`IKSolver.solve`
+    scene_margin: float = 0.02  #: [m] clearance kept between robot spheres and the scene
+    tip_margin: float = 0.005  #: [m] clearance kept between finger spheres and the scene
+    self_margin: float = 0.015  #: [m] clearance kept between the arms and between an arm and the body
+    activation_distance: float = 0.15  #: [m] beyond the margin: farther pairs get no constraint row
+    collision_gain: float = 0.5  #: [-] fraction of the gap to the margin one step may close
+    max_collision_rows: int = 24  #: [-] closest pairs constrained per step
+    self_collision: bool = True  #: [-] constrain left/right arm and arm/body spheres
+
+    def __post_init__(self) -> None:
+        positive = ("position_weight", "orientation_weight", "max_step", "position_tolerance")
+        for name in (*positive, "orientation_tolerance", "activation_distance"):
+            if not getattr(self, name) > 0.0:
+                raise ConfigError(f"IKConfig.{name} must be > 0, got {getattr(self, name)}")
+        for name in (
+            "root_weight",
+            "lift_weight",
+            "posture_weight",
+            "damping",
+            "tip_margin",
+            "scene_margin",
+            "self_margin",
+        ):
+            if not getattr(self, name) >= 0.0:
+                raise ConfigError(f"IKConfig.{name} must be >= 0, got {getattr(self, name)}")
+        if not 0.0 < self.collision_gain <= 1.0:
+            raise ConfigError(f"IKConfig.collision_gain must be in (0, 1], got {self.collision_gain}")
+        if self.iterations < 1 or self.max_collision_rows < 0:
+            raise ConfigError("IKConfig.iterations must be >= 1 and max_collision_rows >= 0")
+
+
+@dataclass(frozen=True, eq=False)
+class IKTargets:
+    """Goals of one IK frame (world frame, [m]).
+
+    Attributes:
+        tcp: side -> (4, 4) TCP goal pose (sides without a goal are free, held by the posture task).
+        root: (4, 4) base floor pose (dual arm) or pelvis pose (humanoid); ``None``: free.
+        lift: [m] torso lift goal; ``None``: free.
+        feet: side -> (4, 4) sole poses held exactly (humanoid).
+        support: feet on the floor whose soles form the CoM support polygon.
+        com: (2,) [m] soft CoM goal (humanoid weight shift), ``None``: none.
+        posture: (nq,) posture configuration; ``None``: the robot's home.
+    """
+
+    tcp: dict[str, F64] = field(default_factory=dict)
+    root: F64 | None = None
+    lift: float | None = None
+    feet: dict[str, F64] = field(default_factory=dict)
+    support: tuple[str, ...] = ("left", "right")
+    com: F64 | None = None
+    posture: F64 | None = None
+
+
+@dataclass(frozen=True)
+class StepInfo:
+    """Outcome of one step: QP status, fallback level (0: full, 1: relaxed rows, 2: no rows), rows used."""
+
+    success: bool
+    fallback: int
+    collision_rows: int
+    min_clearance: float  #: [m] smallest sphere clearance minus its margin at the step start (inf: none)
+
+
+@dataclass(frozen=True)
+class IKResult:
+    """Outcome of :meth:`IKSolver.solve`: configuration, residuals per side, iterations, convergence."""
+
+    q: F64
+    position_error: dict[str, float]  #: [m]
+    orientation_error: dict[str, float]  #: [rad]
+    iterations: int
+    converged: bool
+    fallbacks: int
+
+
+class IKSolver:
+    """Differential IK of one robot (see the module docstring). Not thread-safe."""
+
+    def __init__(
+        self,
+        robot: RobotModel,
+        config: IKConfig | None = None,
+        scene: SceneDistance | None = None,
+        support: SupportConfig | None = None,
+    ) -> None:
+        self.robot, self.config, self.scene = robot, config or IKConfig(), scene
+        self.support = support or SupportConfig()
+        self._model, self._data = robot.model, robot.model.createData()
+        fingers = {robot.v_index(j) for side in robot.gripper_joints.values() for j in side}
+        self.act = np.array([i for i in range(robot.nv) if i not in fingers], dtype=np.int64)
+        self._tcp_ids = {
+            s: robot.model.getFrameId(f, pin.FrameType.BODY) for s, f in robot.tcp_frames.items()
+        }
+        self.spheres = robot_spheres(robot)
+        self._pairs = self.spheres.pairs()
+        self._v_max = np.array(robot.v_max)
+        self._jq = np.array([robot.q_index(n) for n in robot.joint_names], dtype=np.int64)
+        self._jv = np.array([robot.v_index(n) for n in robot.joint_names], dtype=np.int64)
+        self._posture_w = np.full(robot.nv, self.config.posture_weight)
+        free = [j for j in (*BASE_JOINTS, LIFT_JOINT) if j in robot.joint_names]
+        self._posture_w[[robot.v_index(j) for j in free]] = 0.0
+        if robot.floating:
+            self._posture_w[:6] = 0.0
+            self._pelvis = robot.model.getFrameId(robot.description.links[0].name, pin.FrameType.BODY)
+        self._base_v = [robot.v_index(j) for j in BASE_JOINTS if j in robot.joint_names]
+        self._base_q = [robot.q_index(j) for j in BASE_JOINTS if j in robot.joint_names]
+        self._lift = (
+            (robot.q_index(LIFT_JOINT), robot.v_index(LIFT_JOINT))
+            if LIFT_JOINT in robot.joint_names
+            else None
+        )
+        self._rows_max = self.config.max_collision_rows + (12 + 16 if robot.floating else 0)
+        n = int(self.act.shape[0])
+        sparsity = {"h": ca.Sparsity.dense(n, n), "a": ca.Sparsity.dense(max(self._rows_max, 1), n)}
+        self._qp = ca.conic("ik_qp", "daqp", sparsity, {"error_on_fail": False})
+
+    # ------------------------------------------------------------------------------------- tasks
+
+    def _frame_jacobian(self, fid: int) -> F64:
+        return np.asarray(pin.getFrameJacobian(self._model, self._data, fid, _LWA))
+
+    def _pose_error(self, fid: int, goal: F64) -> F64:
+        placement = self._data.oMf[fid]
+        rot = np.asarray(placement.rotation)
+        ep = np.asarray(goal[:3, 3]) - np.asarray(placement.translation)
+        eo = pin.log3(np.asarray(goal[:3, :3]) @ rot.T)
+        return np.concatenate([ep, eo])
+
+    def _tasks(self, q: F64, targets: IKTargets) -> tuple[F64, F64]:
+        """Quadratic objective (H (nv, nv), g (nv,)) of the tasks and the posture."""
+        cfg, nv = self.config, self.robot.nv
+        w_tcp = np.array([cfg.position_weight] * 3 + [cfg.orientation_weight] * 3)
+        hess, grad = np.zeros((nv, nv)), np.zeros(nv)
+        stacked: list[F64] = []
+
+        def add(jac: F64, err: F64, w: F64) -> None:
+            wj = jac * w[:, None]
+            hess[:] += jac.T @ wj
+            grad[:] -= wj.T @ err
+            stacked.append(jac)
+
+        for side, goal in targets.tcp.items():
+            fid = self._tcp_ids[side]
+            add(self._frame_jacobian(fid), self._pose_error(fid, goal), w_tcp)
+        if targets.root is not None and cfg.root_weight > 0.0:
+            goal = np.asarray(targets.root)
+            if self.robot.floating:
+                w = np.full(6, cfg.root_weight)
+                add(self._frame_jacobian(self._pelvis), self._pose_error(self._pelvis, goal), w)
+            elif self._base_v:
+                yaw = math.atan2(goal[1, 0], goal[0, 0])
+                err = np.array([goal[0, 3], goal[1, 3], yaw]) - q[self._base_q]
+                err[2] = (err[2] + math.pi) % (2 * math.pi) - math.pi
+                jac = np.zeros((3, nv))
+                jac[[0, 1, 2], self._base_v] = 1.0
+                add(jac, err, np.full(3, cfg.root_weight))
+        if targets.lift is not None and self._lift is not None and cfg.lift_weight > 0.0:
+            jac = np.zeros((1, nv))
+            jac[0, self._lift[1]] = 1.0
+            add(jac, np.array([targets.lift - q[self._lift[0]]]), np.array([cfg.lift_weight]))
+        posture = self.robot.q_home if targets.posture is None else np.asarray(targets.posture)
+        diff = self._posture_w * pin.difference(self._model, q, posture)
+        if stacked:  # the posture acts in the null space of the tasks: no steady-state task error
+            jac = np.vstack(stacked)[:, self.act]
+            diff_act = diff[self.act]
+            diff[self.act] = diff_act - np.linalg.pinv(jac, rcond=1e-4) @ (jac @ diff_act)
+        hess[np.diag_indices(nv)] += self._posture_w + cfg.damping
+        grad -= diff
+        return hess, grad
+
+    # -------------------------------------------------------------------------------- collisions
+
+    def _collision_rows(self, q: F64) -> tuple[F64, F64, float]:
+        """Rows A (k, nv) and lower bounds (k,) of the closest sphere pairs; smallest clearance - margin."""
+        cfg = self.config
+        return collision_rows(
+            self._model,
+            self._data,
+            self.spheres,
+            self._pairs if cfg.self_collision else np.zeros((0, 2), dtype=np.int64),
+            self.scene,
+            margins=(cfg.scene_margin, cfg.tip_margin, cfg.self_margin),
+            activation=cfg.activation_distance,
+            gain=cfg.collision_gain,
+            max_rows=cfg.max_collision_rows,
+        )
+
+    # ------------------------------------------------------------------------------------ solving
+
+    def step(
+        self, q: F64, targets: IKTargets, dt: float | None = None, q_start: F64 | None = None
+    ) -> tuple[F64, StepInfo]:
+        """One QP step from ``q`` (nq,); ``dt`` [s] adds the velocity limits
+        ``|q + dq - q_start| <= v_max dt`` on the 1-DoF joints (``q_start``: the frame's first configuration,
+        default ``q``)."""
+        robot, cfg, act = self.robot, self.config, self.act
+        q = np.asarray(q, dtype=np.float64)
+        pin.computeJointJacobians(self._model, self._data, q)
+        pin.updateFramePlacements(self._model, self._data)
+        hess, grad = self._tasks(q, targets)
+        lower, upper = np.full(robot.nv, -cfg.max_step), np.full(robot.nv, cfg.max_step)
+        idx_q, idx_v = self._jq, self._jv
+        lo_q, hi_q = robot.q_lower[idx_q], robot.q_upper[idx_q]
+        if dt is not None:
+            start = q[idx_q] if q_start is None else np.asarray(q_start)[idx_q]
+            reach = self._v_max[idx_v] * dt
+            lo_q, hi_q = np.maximum(lo_q, start - reach), np.minimum(hi_q, start + reach)
+        lower[idx_v] = np.maximum(lower[idx_v], lo_q - q[idx_q])
+        upper[idx_v] = np.minimum(upper[idx_v], hi_q - q[idx_q])
+        upper = np.maximum(upper, lower)
+        rows, row_lo, min_slack = self._collision_rows(q)
+        row_hi = np.full(row_lo.shape, np.inf)
+        if robot.floating and targets.feet:
+            eq_a, eq_b, in_a, in_lo, h_add, g_add = support_rows(
+                self._model, self._data, q, targets, self.support
+            )
+            hess += h_add
+            grad += g_add
+            rows = np.vstack([rows, eq_a, in_a])
+            row_lo = np.concatenate([row_lo, eq_b, in_lo])
+            row_hi = np.concatenate([row_hi, eq_b, np.full(in_lo.shape, np.inf)])
+        n_coll = int(min(rows.shape[0], cfg.max_collision_rows))
+        for level in range(3):
+            lo, hi = np.array(row_lo), np.array(row_hi)
+            if level == 1:  # inequality rows: do not get closer / not further outside
+                ineq = ~np.isfinite(hi)
+                lo[ineq] = np.minimum(lo[ineq], 0.0)
+            dq_act, ok = self._solve_qp(
+                hess[np.ix_(act, act)],
+                grad[act],
+                rows[:, act],
+                bounds=(lo, hi, lower[act], upper[act]),
+                level=level,
+            )
+            if ok:
+                break
+        dq = np.zeros(robot.nv)
+        if ok:
+            dq[act] = np.clip(dq_act, lower[act], upper[act])
+        info = StepInfo(bool(ok), level, n_coll, float(min_slack))
+        return robot.integrate(q, dq), info
+
+    def _solve_qp(
+        self, hess: F64, grad: F64, rows: F64, *, bounds: tuple[F64, F64, F64, F64], level: int
+    ) -> tuple[F64, bool]:
+        """Solve with rows ``lo <= rows dx <= hi`` and box ``lbx <= dx <= ubx`` (``bounds``)."""
+        lo, hi, lbx, ubx = bounds
+        m = self._rows_max
+        if rows.shape[0] > m:
+            raise RetargetError(f"IK QP got {rows.shape[0]} constraint rows, more than its {m}")
+        a = np.zeros((max(m, 1), rows.shape[1]))
+        lba, uba = np.full(max(m, 1), -np.inf), np.full(max(m, 1), np.inf)
+        if level < 2:
+            k = rows.shape[0]
+            a[:k], lba[:k], uba[:k] = rows, lo, hi
+        elif np.isfinite(hi).any():  # keep the equality rows (feet) as stiff tasks
+            eq = np.isfinite(hi)
+            hess = hess + 1e4 * rows[eq].T @ rows[eq]
+            grad = grad - 1e4 * rows[eq].T @ hi[eq]
+        res = self._qp(h=hess, g=grad, a=a, lba=lba, uba=uba, lbx=lbx, ubx=ubx)
+        ok = bool(self._qp.stats()["success"])
+        return np.asarray(res["x"], dtype=np.float64).reshape(-1), ok
+
+    def sphere_centers(self, q: F64) -> F64:
+        """(S, 3) [m] world centres of :attr:`spheres` at ``q`` (nq,)."""
+        pin.framesForwardKinematics(self._model, self._data, np.asarray(q, dtype=np.float64))
+        return self.spheres.world(self._data)
+
+    def clearance(self, q: F64) -> float:
+        """[m] smallest sphere clearance minus its margin (scene and self) at ``q``; ``inf`` when every pair
+        is farther than the activation distance beyond its margin."""
+        q = np.asarray(q, dtype=np.float64)
+        pin.computeJointJacobians(self._model, self._data, q)
+        pin.updateFramePlacements(self._model, self._data)
+        return self._collision_rows(q)[2]
+
+    def errors(self, q: F64, targets: IKTargets) -> tuple[dict[str, float], dict[str, float]]:
+        """TCP position [m] and orientation [rad] errors per side with a goal."""
+        pin.framesForwardKinematics(self._model, self._data, np.asarray(q, dtype=np.float64))
+        pos, ori = {}, {}
+        for side, goal in targets.tcp.items():
+            err = self._pose_error(self._tcp_ids[side], np.asarray(goal))
+            pos[side], ori[side] = float(np.linalg.norm(err[:3])), float(np.linalg.norm(err[3:]))
+        return pos, ori
+
+    def solve(
+        self, q0: F64, targets: IKTargets, iterations: int | None = None, dt: float | None = None
+    ) -> IKResult:
+        """Step from ``q0`` until the TCP errors are within tolerance, the steps stall, or ``iterations``."""
+        cfg = self.config
+        q = np.array(q0, dtype=np.float64)
+        fallbacks, done, it = 0, False, 0
+        for step in range(1, (iterations or cfg.iterations) + 1):
+            it = step
+            q_new, info = self.step(q, targets, dt)
+            fallbacks += int(info.fallback > 0)
+            moved = float(np.max(np.abs(pin.difference(self._model, q, q_new))))
+            q = q_new
+            pos, ori = self.errors(q, targets)
+            done = bool(pos) and all(
+                pos[s] <= cfg.position_tolerance and ori[s] <= cfg.orientation_tolerance for s in pos
+            )
+            if done or moved < 1e-7:
+                break
+        pos, ori = self.errors(q, targets)
+        return IKResult(q, pos, ori, it, done, fallbacks)

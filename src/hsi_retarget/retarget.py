@@ -1,0 +1,298 @@
+"""Retargeting front: human goals (a recorded motion, a schedule, planned wrist trajectories) -> a timed
+robot :class:`~hsi_retarget.joint_trajectory.JointTrajectory`.
+
+Pipeline: source -> :class:`~hsi_retarget.mapping.HumanMotion` (:mod:`hsi_retarget.sources`) -> robot goals
+(:func:`~hsi_retarget.mapping.map_to_robot`; unreachable goals flagged) -> per-frame differential IK
+(:class:`~hsi_retarget.ik.IKSolver`; the humanoid's feet from
+:func:`~hsi_retarget.humanoid_ik.plan_footsteps`) -> time-parameterization
+(:func:`~hsi_retarget.timing.time_parameterize`; stretched segments reported). The first frame is solved
+to convergence from the nominal pose; every later frame takes up to ``iterations_per_frame`` steps from the
+previous solution, within ``velocity_factor`` times the joint velocity limits over the source frame period
+(the timing stage then enforces the true limits).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, TypeAlias, cast
+
+import numpy as np
+import pinocchio as pin
+from numpy.typing import NDArray
+
+from hsi_planning.errors import ConfigError, RetargetError
+from hsi_planning.mocap import lowpass
+from hsi_planning.trajectory import WristTrajectory
+from hsi_retarget.collision import SceneDistance
+from hsi_retarget.human_motion import SIDES, HumanMotion
+from hsi_retarget.humanoid_ik import SupportConfig, plan_footsteps
+from hsi_retarget.ik import IKConfig, IKSolver, IKTargets
+from hsi_retarget.joint_trajectory import ContactEvent, JointTrajectory
+from hsi_retarget.mapping import (
+    BASE_JOINTS,
+    LIFT_JOINT,
+    MappingConfig,
+    RobotGoals,
+    map_to_robot,
+    nominal_configuration,
+)
+from hsi_retarget.robots import RobotModel
+from hsi_retarget.sources import human_motion_from_schedule, human_motion_from_wrists
+from hsi_retarget.timing import TimingConfig, time_parameterize
+
+if TYPE_CHECKING:  # imported lazily: the scheduler package is heavy and not needed for recorded motion
+    from hsi_planning.scheduler.schedule import Schedule
+
+_LOG = logging.getLogger(__name__)
+F64 = NDArray[np.float64]
+Source: TypeAlias = "HumanMotion | Schedule | WristTrajectory | Sequence[WristTrajectory]"
+
+
+@dataclass(frozen=True)
+class RetargetConfig:
+    """Every knob of :func:`retarget`."""
+
+    #: Mapping; ``None``: defaults with ``anchor`` = ``world`` for plans and ``shoulder`` for recorded motion.
+    mapping: MappingConfig | None = None
+    ik: IKConfig = field(default_factory=IKConfig)  #: differential IK weights and margins
+    timing: TimingConfig = field(default_factory=TimingConfig)  #: velocity/acceleration limit use
+    support: SupportConfig = field(default_factory=SupportConfig)  #: humanoid feet and stepping
+    iterations_per_frame: int = 3  #: [-] IK steps per frame after the first
+    initial_iterations: int = 200  #: [-] IK steps to converge on the first frame
+    velocity_factor: float = 3.0  #: [-] per-frame step bound, multiple of v_max x frame period
+    smoothing_hz: float = 8.0  #: [Hz] low-pass of a fixed-base robot's arm/base/lift joints; 0: none
+    sample_rate: float = 60.0  #: [Hz] sampling of schedules and wrist trajectories
+    reach_tolerance: float = 0.01  #: [m] IK position residual above which a goal is reported unreached
+    hip: tuple[float, float, float] = (0.0, 0.0, 0.0)  #: hip (x [m], y [m], yaw [rad]) for wrist-only input
+
+    def __post_init__(self) -> None:
+        if self.iterations_per_frame < 1 or self.initial_iterations < 1:
+            raise ConfigError("RetargetConfig.iterations_per_frame and initial_iterations must be >= 1")
+        if not self.smoothing_hz >= 0.0:
+            raise ConfigError(f"RetargetConfig.smoothing_hz must be >= 0 Hz, got {self.smoothing_hz}")
+        if not self.velocity_factor > 0.0 or not self.sample_rate > 0.0 or not self.reach_tolerance > 0.0:
+            raise ConfigError(
+                "RetargetConfig.velocity_factor, sample_rate [Hz], reach_tolerance [m] must be > 0"
+            )
+
+
+def _human_motion(source: Source, cfg: RetargetConfig) -> HumanMotion:
+    if isinstance(source, HumanMotion):
+        return source
+    if hasattr(source, "keyframes") and hasattr(source, "segments"):  # a Schedule
+        return human_motion_from_schedule(cast("Schedule", source), cfg.sample_rate)
+    segments = [source] if isinstance(source, WristTrajectory) else list(source)
+    if not all(isinstance(s, WristTrajectory) for s in segments):
+        raise RetargetError("retarget() takes a HumanMotion, a Schedule or WristTrajectory segments")
+    return human_motion_from_wrists(segments, cfg.hip, rate=cfg.sample_rate)
+
+
+def _scene(scene: Any, motion: HumanMotion, source: Any) -> SceneDistance | None:
+    """A distance query for ``scene`` (spec or ready), without what the task touches: the objects of the
+    grasp/release events and every object or part a schedule keyframe names (doors and drawers move)."""
+    if scene is None or isinstance(scene, SceneDistance):
+        return scene
+    touched = {e.object_name for e in motion.events if e.object_name}
+    touched |= {str(k.object_name) for k in getattr(source, "keyframes", ()) if k.object_name}
+    return SceneDistance.from_spec(scene, exclude=sorted(touched))
+
+
+def _runs(mask: NDArray[np.bool_], t: F64, values: F64, side: str) -> list[dict[str, Any]]:
+    padded = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    out = []
+    for a, b in zip(np.flatnonzero(padded == 1), np.flatnonzero(padded == -1) - 1, strict=True):
+        out.append(
+            {
+                "side": side,
+                "t_start": float(t[a]),
+                "t_end": float(t[b]),
+                "max_error_m": float(values[a : b + 1].max()),
+            }
+        )
+    return out
+
+
+def track(
+    goals: RobotGoals, robot: RobotModel, solver: IKSolver, cfg: RetargetConfig
+) -> tuple[F64, dict[str, F64], dict[str, F64], dict[str, Any]]:
+    """Frame-by-frame IK of ``goals``: configurations (T, nq), TCP position [m] and orientation [rad] errors
+    per side (T,) (NaN where inactive) and diagnostics (fallbacks, clearance, footsteps)."""
+    n = goals.t.shape[0]
+    feet = plan_footsteps(robot, goals.t, goals.root, cfg.support) if robot.floating else None
+    q = nominal_configuration(robot, goals.root[0], float(goals.lift[0]))
+    qs = np.zeros((n, robot.nq))
+    pos_err = {s: np.full(n, np.nan) for s in goals.tcp}
+    ori_err = {s: np.full(n, np.nan) for s in goals.tcp}
+    fallbacks, min_clear = 0, np.inf
+    tol_p, tol_o = solver.config.position_tolerance, solver.config.orientation_tolerance
+    for i in range(n):
+        lift = float(goals.lift[i])
+        root = goals.root[i]
+        if feet is not None and np.isfinite(feet.com[i]).all():  # stepping: pelvis over the stance foot
+            root = np.array(root)
+            root[:2, 3] = feet.com[i]
+            root[2, 3] -= feet.crouch[i]
+        targets = IKTargets(
+            tcp={s: goals.tcp[s][i] for s in goals.tcp if goals.active[s][i]},
+            root=root,
+            lift=lift if np.isfinite(lift) else None,
+            feet={s: feet.feet[s][i] for s in SIDES} if feet is not None else {},
+            support=feet.support[i] if feet is not None else SIDES,
+            com=feet.com[i] if feet is not None and np.isfinite(feet.com[i]).all() else None,
+        )
+        if i == 0:
+            result = solver.solve(q, targets, cfg.initial_iterations)
+            q, fallbacks = result.q, result.fallbacks
+        else:
+            dt = float(goals.t[i] - goals.t[i - 1]) * cfg.velocity_factor
+            q_start = q
+            for _ in range(cfg.iterations_per_frame):
+                q, info = solver.step(q, targets, dt, q_start)
+                fallbacks += int(info.fallback > 0)
+                min_clear = min(min_clear, info.min_clearance)
+                pe, oe = solver.errors(q, targets)
+                if all(pe[s] <= tol_p and oe[s] <= tol_o for s in pe):
+                    break
+        qs[i] = q
+        pe, oe = solver.errors(q, targets)
+        for s in pe:
+            pos_err[s][i], ori_err[s][i] = pe[s], oe[s]
+    diag: dict[str, Any] = {"qp_fallbacks": fallbacks, "min_collision_slack_m": float(min_clear)}
+    if feet is not None:
+        diag["footsteps"] = feet.steps
+    return qs, pos_err, ori_err, diag
+
+
+def smooth_joints(robot: RobotModel, t: F64, qs: F64, cutoff_hz: float) -> F64:
+    """Zero-phase low-pass (cut-off ``cutoff_hz`` [Hz]) of the arm joints and the base/lift of ``qs`` (T, nq)
+    sampled at ``t`` (T,) [s], clipped to the joint limits. Removes the IK's frame-to-frame chatter along
+    active collision constraints, which would otherwise force a large time stretch. Fixed-base robots only:
+    a floating robot's arms move with its torso, and its legs must keep the soles exactly in place."""
+    out = np.array(qs)
+    if cutoff_hz <= 0.0 or t.shape[0] < 16 or robot.floating:
+        return out
+    fs = 1.0 / float(np.median(np.diff(t)))
+    if cutoff_hz >= 0.5 * fs:
+        return out
+    names = [j for side in SIDES for j in robot.arm_joints[side]]
+    names += [j for j in (*BASE_JOINTS, LIFT_JOINT) if j in robot.joint_names]
+    idx = np.array([robot.q_index(j) for j in names], dtype=np.int64)
+    out[:, idx] = np.clip(lowpass(qs[:, idx], fs, cutoff_hz), robot.q_lower[idx], robot.q_upper[idx])
+    return out
+
+
+def tcp_errors(robot: RobotModel, goals: RobotGoals, qs: F64) -> tuple[dict[str, F64], dict[str, F64]]:
+    """TCP position [m] and orientation [rad] errors (T,) per side of ``qs`` against ``goals`` (NaN where
+    the side's goal is inactive)."""
+    n = goals.t.shape[0]
+    pos = {s: np.full(n, np.nan) for s in goals.tcp}
+    ori = {s: np.full(n, np.nan) for s in goals.tcp}
+    frames = tuple(robot.tcp_frames[s] for s in goals.tcp)
+    for i in range(n):
+        fk = robot.fk(qs[i], frames)
+        for s in goals.tcp:
+            if goals.active[s][i]:
+                pose, goal = fk[robot.tcp_frames[s]], goals.tcp[s][i]
+                pos[s][i] = float(np.linalg.norm(goal[:3, 3] - pose[:3, 3]))
+                ori[s][i] = float(np.linalg.norm(pin.log3(goal[:3, :3] @ pose[:3, :3].T)))
+    return pos, ori
+
+
+def retarget(
+    source: Source,
+    robot: RobotModel | str,
+    scene: Any = None,
+    config: RetargetConfig | None = None,
+) -> JointTrajectory:
+    """Retarget human goals onto ``robot`` (see the module docstring).
+
+    Args:
+        source: a :class:`HumanMotion` (e.g. :func:`~hsi_retarget.sources.human_motion_from_mocap`), a
+            :class:`Schedule`, or planned :class:`WristTrajectory` segments.
+        robot: a :class:`RobotModel` or a robot name (``dual_ur5e``/``dual_arm``, ``humanoid``).
+        scene: a scene spec (its meshes become collision margins; objects named in the events are left
+            out), a :class:`SceneDistance`, or ``None`` (no scene margins).
+        config: :class:`RetargetConfig`.
+
+    Returns:
+        The timed trajectory; ``meta`` reports the mapping (scale, anchor), unreachable goals (per-sample
+        ``reachable`` flags and intervals), IK residuals, the IK rate [frames/s], and the time scaling.
+    """
+    cfg = config or RetargetConfig()
+    model = robot if isinstance(robot, RobotModel) else RobotModel(robot)
+    motion = _human_motion(source, cfg)
+    mapping = cfg.mapping or MappingConfig(anchor="shoulder" if motion.shoulder_position else "world")
+    t0 = time.perf_counter()
+    goals = map_to_robot(motion, model, mapping)
+    t_map = time.perf_counter() - t0
+    solver = IKSolver(model, cfg.ik, _scene(scene, motion, source), cfg.support)
+    t1 = time.perf_counter()
+    qs, _, _, diag = track(goals, model, solver, cfg)
+    qs = smooth_joints(model, goals.t, qs, cfg.smoothing_hz)
+    pos_err, ori_err = tcp_errors(model, goals, qs)
+    t_ik = time.perf_counter() - t1
+    vq, aq = np.full(model.nq, np.inf), np.full(model.nq, np.inf)
+    for name in model.joint_names:
+        vq[model.q_index(name)] = model.v_max[model.v_index(name)]
+        aq[model.q_index(name)] = model.a_max[model.v_index(name)]
+    timing = time_parameterize(goals.t, qs, vq, aq, config=cfg.timing)
+    warp = np.interp
+    events = tuple(
+        ContactEvent(float(warp(e.time, goals.t, timing.t)), e.hand, e.kind, e.object_name)
+        for e in motion.events
+    )
+    n = goals.t.shape[0]
+    tracking: dict[str, Any] = {}
+    unreached: list[dict[str, Any]] = []
+    for s in goals.tcp:
+        act = goals.active[s]
+        pe, oe = pos_err[s][act], ori_err[s][act]
+        tracking[s] = {
+            "max_position_error_m": float(pe.max()) if pe.size else 0.0,
+            "rms_position_error_m": float(np.sqrt(np.mean(pe**2))) if pe.size else 0.0,
+            "max_orientation_error_deg": float(np.degrees(oe.max())) if oe.size else 0.0,
+        }
+        unreached += _runs(
+            act & (np.nan_to_num(pos_err[s]) > cfg.reach_tolerance), goals.t, np.nan_to_num(pos_err[s]), s
+        )
+    meta: dict[str, Any] = {
+        "source": motion.source,
+        "anchor": mapping.anchor,
+        "scale": goals.scale,
+        "frames": n,
+        "source_rate_hz": float((n - 1) / (goals.t[-1] - goals.t[0])) if n > 1 else 0.0,
+        "ik_time_s": t_ik,
+        "ik_rate_fps": n / t_ik if t_ik > 0 else float("inf"),
+        "mapping_time_s": t_map,
+        "reachable": {s: goals.reachable[s].tolist() for s in goals.tcp},
+        "unreachable": goals.unreachable_intervals(),
+        "ik_unreached": unreached,
+        "tracking": tracking,
+        "goal_position": {s: goals.tcp[s][:, :3, 3] for s in goals.tcp},
+        "goal_time": goals.t,
+        "time_scaling": timing.summary(goals.t),
+        **diag,
+    }
+    if np.isfinite(goals.lift).any():
+        il = model.q_index("torso_lift_joint")
+        saturated = (goals.lift <= model.q_lower[il] + 1e-9) | (goals.lift >= model.q_upper[il] - 1e-9)
+        meta["lift_saturated_fraction"] = float(np.mean(saturated))
+    if meta["unreachable"]:
+        _LOG.warning(
+            "%d unreachable goal interval(s) for %s: %s",
+            len(meta["unreachable"]),
+            model.name,
+            meta["unreachable"][:3],
+        )
+    return JointTrajectory(
+        robot=model.name,
+        t=timing.t - timing.t[0],
+        q=qs,
+        joint_names=model.joint_names,
+        events=events,
+        meta=meta,
+        floating_index=0 if model.floating else -1,
+    )

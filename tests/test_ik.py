@@ -1,0 +1,252 @@
+"""Differential IK: convergence on reachable targets, limits, collision margins (scene wall, other arm),
+humanoid feet and centre of mass, Jacobians against finite differences."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+import trimesh
+
+from hsi_planning.errors import ConfigError, RetargetError
+from hsi_retarget.collision import SceneDistance, robot_spheres
+from hsi_retarget.humanoid_ik import SupportConfig, com_inside, support_polygon
+from hsi_retarget.ik import IKConfig, IKSolver, IKTargets
+from hsi_retarget.robots import RobotModel
+
+SIDES = ("left", "right")
+
+
+@pytest.fixture(scope="module")
+def robots() -> dict[str, RobotModel]:
+    return {name: RobotModel(name) for name in ("dual_ur5e", "humanoid")}
+
+
+def _feet(robot: RobotModel) -> dict[str, np.ndarray]:
+    if not robot.floating:
+        return {}
+    return {s: robot.frame_pose(robot.q_home, f"{s}_sole") for s in SIDES}
+
+
+def _root(robot: RobotModel) -> np.ndarray | None:
+    return robot.frame_pose(robot.q_home, "pelvis") if robot.floating else None
+
+
+def _com(robot: RobotModel, q: np.ndarray) -> np.ndarray:
+    return np.asarray(pin.centerOfMass(robot.model, robot.model.createData(), q))
+
+
+def _random_targets(
+    robot: RobotModel, solver: IKSolver, rng: np.random.Generator, count: int
+) -> list[dict[str, np.ndarray]]:
+    """TCP poses of random arm configurations near home that are collision-free and balanced."""
+    out = []
+    while len(out) < count:
+        q = np.array(robot.q_home)
+        for side in SIDES:
+            idx = robot.arm_q_indices(side)
+            q[idx] = np.clip(
+                q[idx] + rng.uniform(-0.6, 0.6, idx.shape[0]), robot.q_lower[idx], robot.q_upper[idx]
+            )
+        if solver.clearance(q) < 0.01:
+            continue
+        if robot.floating and not com_inside(
+            _com(robot, q)[:2], list(_feet(robot).values()), SupportConfig()
+        ):
+            continue
+        out.append({s: robot.frame_pose(q, robot.tcp_frames[s]) for s in SIDES})
+    return out
+
+
+@pytest.mark.parametrize("name", ["dual_ur5e", "humanoid"])
+def test_reaches_random_reachable_targets_within_1mm_1deg(robots: dict[str, RobotModel], name: str) -> None:
+    robot = robots[name]
+    solver = IKSolver(robot)
+    rng = np.random.default_rng(7)
+    for goal in _random_targets(robot, solver, rng, 5):
+        result = solver.solve(robot.q_home, IKTargets(tcp=goal, root=_root(robot), feet=_feet(robot)))
+        assert result.iterations < 100, (result.position_error, result.orientation_error)
+        for side in SIDES:
+            assert result.position_error[side] < 1e-3
+            assert np.degrees(result.orientation_error[side]) < 1.0
+        assert robot.within_limits(result.q)
+
+
+@pytest.mark.parametrize("name", ["dual_ur5e", "humanoid"])
+def test_limits_never_violated_for_random_goals(robots: dict[str, RobotModel], name: str) -> None:
+    """Property: random goals (many out of reach) never drive a joint past its position limit, and one
+    step with ``dt`` never exceeds the velocity limits."""
+    robot = robots[name]
+    solver = IKSolver(robot, IKConfig(max_step=0.5))
+    rng = np.random.default_rng(11)
+    dt = 1.0 / 60.0
+    v_max = robot.v_max
+    for _ in range(6):
+        q = robot.random_configuration(rng) if not robot.floating else np.array(robot.q_home)
+        if not robot.floating:
+            q = np.clip(q, robot.q_lower, robot.q_upper)
+        shoulder = robot.frame_pose(robot.q_home, robot.shoulder_frames["right"])[:3, 3]
+        goal = np.eye(4)
+        goal[:3, :3] = pin.exp3(rng.normal(size=3))
+        goal[:3, 3] = shoulder + rng.uniform(-2.0, 2.0, 3)
+        targets = IKTargets(tcp={"right": goal}, root=_root(robot), feet=_feet(robot))
+        for _ in range(8):
+            q_new, _info = solver.step(q, targets, dt)
+            assert robot.within_limits(q_new, tol=1e-9)
+            moved = pin.difference(robot.model, q, q_new)
+            limited = np.isfinite(v_max)
+            assert np.all(np.abs(moved[limited]) <= v_max[limited] * dt + 1e-9)
+            q = q_new
+
+
+def test_unreachable_target_leaves_a_residual_not_a_crash(robots: dict[str, RobotModel]) -> None:
+    robot = robots["dual_ur5e"]
+    solver = IKSolver(robot)
+    goal = robot.frame_pose(robot.q_home, "right_tcp")
+    goal[:3, 3] = [4.0, -0.25, 1.0]  # 4 m ahead; the base goal (origin) and the TCP goal compete
+    result = solver.solve(robot.q_home, IKTargets(tcp={"right": goal}, root=np.eye(4)), iterations=80)
+    assert not result.converged
+    assert result.position_error["right"] > 1.0
+    assert robot.within_limits(result.q)
+
+
+def test_collision_margin_to_a_wall_in_front_of_the_arm(robots: dict[str, RobotModel]) -> None:
+    robot = robots["dual_ur5e"]
+    wall_x = 0.65  # the wall's near face [m]
+    wall = trimesh.creation.box(extents=(0.05, 2.0, 2.0))
+    wall.apply_translation([wall_x + 0.025, 0.0, 1.0])
+    scene = SceneDistance({"wall": wall})
+    config = IKConfig(scene_margin=0.03)
+    goal = robot.frame_pose(robot.q_home, "right_tcp")
+    goal[:3, 3] = [0.95, -0.25, 1.0]  # behind the wall
+    targets = IKTargets(tcp={"right": goal}, root=np.eye(4), lift=0.225)
+    free = IKSolver(robot, config).solve(robot.q_home, targets, iterations=150)
+    assert free.position_error["right"] < 1e-3  # without the wall it is reachable
+    walled = IKSolver(robot, config, scene)
+    result = walled.solve(robot.q_home, targets, iterations=150)
+    centers = walled.sphere_centers(result.q)
+    dist, _ = scene.query(centers)
+    clearance = dist - walled.spheres.radii
+    tips = walled.spheres.tips
+    body = clearance[~tips]
+    assert body.min() >= config.scene_margin - 2e-3, body.min()
+    assert clearance[tips].min() >= config.tip_margin - 2e-3, clearance[tips].min()
+    # it pressed up to the margin (the fingers or the gripper body stop it)
+    assert min(body.min() - config.scene_margin, clearance[tips].min() - config.tip_margin) < 0.005
+    tcp_x = robot.frame_pose(result.q, "right_tcp")[0, 3]
+    assert tcp_x < wall_x - config.tip_margin
+    assert result.position_error["right"] > 0.25
+
+
+def test_arms_keep_the_self_margin_when_their_goals_cross(robots: dict[str, RobotModel]) -> None:
+    robot = robots["dual_ur5e"]
+    config = IKConfig(self_margin=0.02)
+    solver = IKSolver(robot, config)
+    left = robot.frame_pose(robot.q_home, "left_tcp")
+    right = robot.frame_pose(robot.q_home, "right_tcp")
+    left[:3, 3], right[:3, 3] = [0.5, -0.05, 1.0], [0.5, 0.05, 1.0]  # each hand beyond the other
+    result = solver.solve(
+        robot.q_home, IKTargets(tcp={"left": left, "right": right}, root=np.eye(4)), iterations=150
+    )
+    centers = solver.sphere_centers(result.q)
+    sph = solver.spheres
+    a, b = sph.of("left"), sph.of("right")
+    gaps = (
+        np.linalg.norm(centers[a][:, None] - centers[b][None], axis=2)
+        - sph.radii[a][:, None]
+        - sph.radii[b][None]
+    )
+    assert gaps.min() >= config.self_margin - 2e-3
+    assert result.position_error["left"] > 0.01  # the crossing goals cannot both be met
+
+
+def test_humanoid_feet_fixed_and_com_inside_while_wrists_track(robots: dict[str, RobotModel]) -> None:
+    robot = robots["humanoid"]
+    support = SupportConfig()
+    solver = IKSolver(robot, support=support)
+    feet = _feet(robot)
+    q = np.array(robot.q_home)
+    start = {s: robot.frame_pose(q, robot.tcp_frames[s]) for s in SIDES}
+    dt = 1.0 / 60.0
+    errors = []
+    for k in range(90):  # wrists sweep forward/out and up/down by 25 cm
+        phase = 2.0 * np.pi * k / 90.0
+        tcp = {}
+        for side, sign in (("left", 1.0), ("right", -1.0)):
+            pose = np.array(start[side])
+            pose[:3, 3] += [0.25 * np.sin(phase / 2), sign * 0.1 * np.sin(phase), 0.25 * np.sin(phase)]
+            tcp[side] = pose
+        targets = IKTargets(tcp=tcp, root=_root(robot), feet=feet)
+        q_start = q
+        for _ in range(3):
+            q, _info = solver.step(q, targets, dt * 3.0, q_start)
+        fk = robot.fk(q, ("left_sole", "right_sole"))
+        for side in SIDES:
+            assert np.linalg.norm(fk[f"{side}_sole"][:3, 3] - feet[side][:3, 3]) < 1e-3
+        assert com_inside(_com(robot, q)[:2], list(feet.values()), support, tol=1e-4)
+        pos, _ori = solver.errors(q, targets)
+        errors.append(max(pos.values()))
+    assert np.median(errors) < 0.01, np.median(errors)
+
+
+def test_support_polygon_is_the_hull_of_both_soles(robots: dict[str, RobotModel]) -> None:
+    robot = robots["humanoid"]
+    cfg = SupportConfig(com_margin=0.0)
+    normals, offsets = support_polygon(list(_feet(robot).values()), cfg)
+    assert np.allclose(np.linalg.norm(normals, axis=1), 1.0) and offsets.shape == (normals.shape[0],)
+    # soles at x 0.045 +/- 0.13, y +/-(0.09 + 0.05)
+    assert com_inside(np.array([0.17, 0.13]), list(_feet(robot).values()), cfg)
+    assert not com_inside(np.array([0.18, 0.0]), list(_feet(robot).values()), cfg)
+    assert not com_inside(np.array([0.0, 0.15]), list(_feet(robot).values()), cfg)
+
+
+@pytest.mark.parametrize("name", ["dual_ur5e", "humanoid"])
+def test_tcp_jacobian_matches_finite_differences(robots: dict[str, RobotModel], name: str) -> None:
+    robot = robots[name]
+    rng = np.random.default_rng(3)
+    q = np.clip(robot.random_configuration(rng, root_box=0.2), robot.q_lower, robot.q_upper)
+    jac = robot.jacobian(q, "right_tcp")
+    pose0 = robot.frame_pose(q, "right_tcp")
+    eps = 1e-6
+    numeric = np.zeros_like(jac)
+    for k in range(robot.nv):
+        dq = np.zeros(robot.nv)
+        dq[k] = eps
+        pose = robot.frame_pose(robot.integrate(q, dq), "right_tcp")
+        numeric[:3, k] = (pose[:3, 3] - pose0[:3, 3]) / eps
+        numeric[3:, k] = pin.log3(pose[:3, :3] @ pose0[:3, :3].T) / eps
+    assert np.allclose(jac, numeric, atol=1e-5)
+
+
+def test_spheres_cover_forearm_wrist_gripper_and_finger_tips(robots: dict[str, RobotModel]) -> None:
+    for robot in robots.values():
+        spheres = robot_spheres(robot)
+        frames = np.array(spheres.frames)
+        assert "right_gripper_link" in frames and any(f.startswith("right_forearm") for f in frames)
+        assert not any("upper_arm" in f or "shoulder" in f for f in frames)  # the arm from the elbow out
+        assert set(frames[spheres.tips]) == {f"{s}_finger_{k}" for s in SIDES for k in "ab"}
+        assert all(len(spheres.of(g)) > 0 for g in ("left", "right", "body"))
+        assert np.all(spheres.radii > 0.0)
+
+
+def test_bad_config_is_rejected() -> None:
+    with pytest.raises(ConfigError, match="collision_gain"):
+        IKConfig(collision_gain=0.0)
+    with pytest.raises(ConfigError, match="position_weight"):
+        IKConfig(position_weight=-1.0)
+    with pytest.raises(ConfigError, match="com_margin"):
+        SupportConfig(com_margin=0.2)
+
+
+def test_scene_distance_is_signed_and_robust_next_to_edges() -> None:
+    box = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
+    points = np.array(
+        [[0.0, 0.0, 0.0], [0.4, 0.0, 0.0], [0.50001, 0.0, 0.8], [0.9, 0.0, 0.0], [0.5, 0.5, 1.0]]
+    )
+    dist, grad = SceneDistance({"box": box}).query(points)
+    assert np.allclose(dist, [-0.5, -0.1, 0.3, 0.4, 0.5], atol=1e-4)
+    assert np.allclose(np.linalg.norm(grad, axis=1), 1.0)
+    step = points + 1e-3 * grad  # moving along the gradient increases the distance
+    assert np.all(SceneDistance({"box": box}).query(step)[0] > dist)
+    with pytest.raises(RetargetError, match="no scene mesh"):
+        SceneDistance({"box": box}, exclude=["box"])

@@ -1,0 +1,346 @@
+"""Retargeting: mapping (scale about the shoulders, unreachable goals reported), timed output within the
+velocity/acceleration limits, schedules and planned wrist segments, a real HDM05 clip at >= real-time rate,
+the ``hsi retarget`` CLI and the retarget node."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from hsi_nodes.executor import Executor
+from hsi_nodes.msgs import make_header, make_pose, msg_class
+from hsi_nodes.node import Node
+from hsi_nodes.nodes import load_executable
+from hsi_nodes.nodes.retarget_node import RetargetNode, joint_trajectory_from_msg
+from hsi_nodes.transport import make_transport
+from hsi_nodes.transport.base import QoS, Transport
+from hsi_planning.errors import ConfigError, RetargetError
+from hsi_planning.mocap import load_amc, load_asf
+from hsi_planning.mocap.skeleton import Motion
+from hsi_planning.scheduler.schedule import Keyframe, Schedule
+from hsi_planning.trajectory import WristTrajectory
+from hsi_retarget.human_motion import HumanMotion
+from hsi_retarget.joint_trajectory import ContactEvent, JointTrajectory
+from hsi_retarget.mapping import MappingConfig, map_to_robot, robot_reach
+from hsi_retarget.retarget import RetargetConfig, retarget
+from hsi_retarget.robots import RobotModel
+from hsi_retarget.sources import human_motion_from_mocap
+from hsi_retarget.timing import time_parameterize
+
+CLIP = "HDM_bd_grabHighR_001_120.amc"
+
+
+@pytest.fixture(scope="module")
+def dual() -> RobotModel:
+    return RobotModel("dual_ur5e")
+
+
+def _limits(robot: RobotModel) -> tuple[np.ndarray, np.ndarray]:
+    v, a = np.full(robot.nq, np.inf), np.full(robot.nq, np.inf)
+    for name in robot.joint_names:
+        v[robot.q_index(name)] = robot.v_max[robot.v_index(name)]
+        a[robot.q_index(name)] = robot.a_max[robot.v_index(name)]
+    return v, a
+
+
+def _motion(n: int, rate: float, right: np.ndarray, left: np.ndarray | None = None) -> HumanMotion:
+    """Standing human at the origin facing +x; wrist positions (n, 3), identity wrist orientation."""
+    left = np.tile([0.3, 0.25, 1.0], (n, 1)) if left is None else left
+    eye = np.tile(np.eye(3), (n, 1, 1))
+    return HumanMotion(
+        t=np.arange(n) / rate,
+        wrist_position={"left": left, "right": right},
+        wrist_rotation={"left": eye, "right": eye},
+        active={"left": np.ones(n, bool), "right": np.ones(n, bool)},
+        hip_position=np.tile([0.0, 0.0, 0.95], (n, 1)),
+        hip_yaw=np.zeros(n),
+    )
+
+
+def test_joint_trajectory_sample_renormalizes_and_roundtrips(tmp_path: Path) -> None:
+    q0 = np.r_[0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.5]
+    q1 = np.r_[1.0, 0.0, 1.0, *Rotation.from_euler("z", 170, degrees=True).as_quat(), 1.5]
+    traj = JointTrajectory(
+        "humanoid",
+        [0.0, 1.0],
+        [q0, q1],
+        ("j",),
+        (ContactEvent(0.5, "left", "grasp", "can1"),),
+        {"a": np.ones(2)},
+    )
+    assert traj.root_index == 0
+    mid = traj.sample(0.5)
+    assert abs(np.linalg.norm(mid[3:7]) - 1.0) < 1e-12
+    assert mid[0] == pytest.approx(0.5) and mid[7] == pytest.approx(1.0)
+    back = JointTrajectory.read_json(traj.write_json(tmp_path / "t.json"))
+    assert np.allclose(back.q, traj.q) and back.events == traj.events and back.meta == {"a": [1.0, 1.0]}
+    fixed = JointTrajectory("dual_ur5e", [0.0, 1.0], np.zeros((2, 2)), ("a", "b"))
+    assert fixed.root_index == -1
+    with pytest.raises(RetargetError, match="malformed"):
+        JointTrajectory.from_dict({"robot": "x"})
+
+
+def test_time_parameterize_meets_limits_and_leaves_slow_paths_alone() -> None:
+    t = np.arange(241) / 120.0
+    q = np.column_stack([0.8 * np.sin(2 * np.pi * 2.0 * t), 0.05 * t])
+    v_max, a_max = np.array([3.0, 3.0]), np.array([10.0, 10.0])
+    res = time_parameterize(t, q, v_max, a_max)
+    v = np.diff(q, axis=0) / np.diff(res.t)[:, None]
+    a = np.diff(v, axis=0) / (0.5 * (np.diff(res.t)[1:] + np.diff(res.t)[:-1]))[:, None]
+    assert np.all(np.abs(v) <= v_max * (1 + 1e-9)) and np.all(np.abs(a) <= a_max * (1 + 1e-9))
+    assert res.acceleration_ratio_in > 10.0 and res.t[-1] > 3.0 * t[-1]
+    slow = time_parameterize(t, 0.01 * q, v_max, a_max)
+    assert np.allclose(slow.t, t) and slow.segments(t) == []
+
+
+def test_mapping_scales_wrist_offsets_about_the_shoulders(dual: RobotModel) -> None:
+    n = 5
+    shoulder = {"left": np.tile([0.0, 0.18, 1.4], (n, 1)), "right": np.tile([0.0, -0.18, 1.4], (n, 1))}
+    offset = np.array([0.3, -0.1, -0.2])
+    motion = _motion(n, 60.0, shoulder["right"] + offset, shoulder["left"] + offset)
+    motion = HumanMotion(**{**motion.__dict__, "shoulder_position": shoulder, "arm_length": 0.55})
+    goals = map_to_robot(motion, dual, MappingConfig(anchor="shoulder"))
+    reach = robot_reach(dual)
+    assert goals.scale == pytest.approx(0.85 * np.mean(list(reach.values())) / 0.55)
+    for side in ("left", "right"):
+        expected = goals.shoulder[side] + goals.scale * offset
+        assert np.allclose(goals.tcp[side][:, :3, 3], expected)
+        assert goals.reachable[side].all()
+    # identity wrist orientation = the dual arm's home TCP orientation (z forward, y left)
+    home = dual.frame_pose(dual.q_home, "right_tcp")[:3, :3]
+    assert np.allclose(goals.tcp["right"][0, :3, :3], home, atol=1e-4)
+    # the torso lift brings the robot's shoulders to the human's height (within the lift range)
+    assert np.allclose(goals.shoulder["right"][:, 2], 1.4 * 1.35 / 1.4, atol=1e-3)
+
+
+def test_unreachable_goals_are_reported_not_clipped(dual: RobotModel) -> None:
+    n = 60
+    right = np.tile([0.45, -0.25, 1.0], (n, 1))
+    right[20:40] = [2.5, -0.25, 1.0]  # 2.5 m ahead of a base that follows the hip
+    motion = _motion(n, 60.0, right)
+    goals = map_to_robot(motion, dual, MappingConfig(anchor="world"))
+    assert np.allclose(goals.tcp["right"][:, :3, 3], right)  # not clipped
+    assert not goals.reachable["right"][20:40].any() and goals.reachable["right"][:20].all()
+    traj = retarget(motion, dual, config=RetargetConfig(mapping=MappingConfig(anchor="world")))
+    flags = np.array(traj.meta["reachable"]["right"])
+    assert flags.shape == (n,) and not flags[20:40].any() and flags[40:].all()
+    (interval,) = traj.meta["unreachable"]
+    assert interval["side"] == "right" and interval["t_start"] == pytest.approx(20 / 60.0)
+    assert interval["max_excess_m"] > 0.5
+    assert any(r["side"] == "right" for r in traj.meta["ik_unreached"])
+    assert all(dual.within_limits(q) for q in traj.q)
+
+
+def test_timed_output_respects_velocity_and_acceleration_limits(dual: RobotModel) -> None:
+    n, rate = 240, 120.0
+    t = np.arange(n) / rate
+    right = np.column_stack(
+        [0.5 + 0.15 * np.sin(2 * np.pi * 2.0 * t), -0.25 + 0.1 * np.cos(2 * np.pi * 2.0 * t), 1.0 + 0 * t]
+    )
+    traj = retarget(
+        _motion(n, rate, right), dual, config=RetargetConfig(mapping=MappingConfig(anchor="world"))
+    )
+    v_max, a_max = _limits(dual)
+    v = np.diff(traj.q, axis=0) / np.diff(traj.t)[:, None]
+    h = np.diff(traj.t)
+    a = np.diff(v, axis=0) / (0.5 * (h[1:] + h[:-1]))[:, None]
+    assert np.all(np.abs(v) <= v_max * (1 + 1e-6))
+    assert np.all(np.abs(a) <= a_max * (1 + 1e-6))
+    scaling = traj.meta["time_scaling"]
+    assert scaling["max_scale"] > 1.0 and traj.duration > t[-1]  # it had to slow down, and says so
+    assert scaling["segments"] and scaling["velocity_ratio"] <= 1.0 and scaling["acceleration_ratio"] <= 1.0
+    assert traj.meta["tracking"]["right"]["max_position_error_m"] < 0.01
+    assert all(dual.within_limits(q) for q in traj.q)
+
+
+def test_schedule_retargets_with_base_following_the_hip(dual: RobotModel) -> None:
+    def key(time_s: float, joint: str, pos: list[float], **kw: Any) -> Keyframe:
+        return Keyframe(
+            time_s, joint, np.array(pos), np.array([0.0, 0.0, 0.0, 1.0]), kw.pop("action", "reach"), **kw
+        )  # type: ignore[arg-type]
+
+    frames = []
+    for time_s, hip_x, right, event in (
+        (0.0, 0.0, [0.45, -0.25, 1.0], ""),
+        (1.5, 0.2, [0.8, -0.2, 0.9], "grasp"),
+        (3.0, 0.3, [0.65, -0.25, 1.1], ""),
+    ):
+        frames += [
+            key(time_s, "hip", [hip_x, 0.0, 0.95]),
+            key(time_s, "root", [hip_x, 0.0, 0.0]),
+            key(time_s, "left_wrist", [hip_x + 0.45, 0.25, 1.0]),
+            key(
+                time_s,
+                "right_wrist",
+                right,
+                contact_event=event,
+                hand="right",
+                object_name="can1" if event else "",
+            ),
+        ]
+    traj = retarget(Schedule("t1", tuple(frames)), dual)
+    assert traj.meta["anchor"] == "world"
+    (event,) = traj.events
+    assert (event.hand, event.kind, event.object_name) == ("right", "grasp", "can1")
+    k = int(np.argmin(np.abs(np.array(traj.meta["goal_time"]) - 1.5)))
+    assert traj.t[k] == pytest.approx(event.time)
+    tcp = dual.frame_pose(traj.q[k], "right_tcp")[:3, 3]
+    assert np.linalg.norm(tcp - [0.8, -0.2, 0.9]) < 0.01
+    assert traj.q[-1][dual.q_index("base_x_joint")] == pytest.approx(0.3, abs=0.05)
+
+
+def test_wrist_segments_become_one_trajectory_with_events(dual: RobotModel) -> None:
+    t = np.linspace(0.0, 1.0, 31)
+    path = np.column_stack([0.4 + 0.3 * t, -0.25 + 0 * t, 1.0 - 0.1 * t])
+    quat = np.tile([0.0, 0.0, 0.0, 1.0], (31, 1))
+    approach = WristTrajectory(t, path, quat, "right", "grasp", "approach", object_name="can1")
+    leave = WristTrajectory(
+        t, path[::-1], quat, "right", "grasp", "leave", contact_index=0, object_name="can1"
+    )
+    traj = retarget([approach, leave], dual)
+    assert [(e.kind, e.object_name) for e in traj.events] == [("grasp", "can1")]
+    assert traj.meta["tracking"]["right"]["max_position_error_m"] < 0.005
+    with pytest.raises(RetargetError, match="no wrist"):
+        retarget([], dual)
+
+
+def test_humanoid_retarget_keeps_feet_and_normalized_root() -> None:
+    robot = RobotModel("humanoid")
+    n = 60
+    right = np.tile([0.3, -0.25, 1.0], (n, 1)) + np.outer(np.sin(np.linspace(0, np.pi, n)), [0.15, 0.0, 0.1])
+    traj = retarget(
+        _motion(n, 60.0, right), robot, config=RetargetConfig(mapping=MappingConfig(anchor="world"))
+    )
+    assert traj.root_index == 0
+    assert np.allclose(np.linalg.norm(traj.q[:, 3:7], axis=1), 1.0)
+    soles = np.array([[robot.frame_pose(q, f"{s}_sole")[:3, 3] for s in ("left", "right")] for q in traj.q])
+    assert np.abs(soles - soles[0]).max() < 1e-3
+    assert traj.meta["tracking"]["right"]["max_position_error_m"] < 0.01
+
+
+def test_hdm05_clip_retargets_faster_than_real_time(hdm05_dir: Path, dual: RobotModel) -> None:
+    skeleton = load_asf(hdm05_dir / "HDM_bd.asf")
+    motion = load_amc(hdm05_dir / CLIP, skeleton)
+    part = Motion(motion.channels, motion.values[40:160], motion.fps)  # 1 s of the reach
+    wall = time.perf_counter()
+    human = human_motion_from_mocap(skeleton, part)
+    traj = retarget(human, dual)
+    wall = time.perf_counter() - wall
+    rate, ik_rate = 120 / wall, traj.meta["ik_rate_fps"]
+    print(f"HDM05 {CLIP} frames 40-160 on dual_ur5e: {rate:.0f} frames/s overall, {ik_rate:.0f} IK frames/s")
+    assert ik_rate >= 120.0, f"IK at {ik_rate:.0f} frames/s is slower than the 120 fps source"
+    assert traj.meta["scale"] > 1.2  # the UR5e arm is longer than a human arm
+    right = traj.meta["tracking"]["right"]
+    assert right["rms_position_error_m"] < 0.01, right
+    assert all(dual.within_limits(q) for q in traj.q)
+
+
+def _cli(argv: list[str]) -> int:
+    from hsi_nodes.cli import retarget as command
+
+    parser = argparse.ArgumentParser()
+    command.register(parser.add_subparsers(dest="command"))
+    args = parser.parse_args(["retarget", *argv])
+    return int(args.func(args))
+
+
+def test_cli_writes_valid_json_and_plays_it(
+    hdm05_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "traj.json"
+    code = _cli(
+        [
+            str(hdm05_dir / CLIP),
+            "--robot",
+            "dual_arm",
+            "--out",
+            str(out),
+            "--start",
+            "60",
+            "--frames",
+            "48",
+            "--sim",
+        ]
+    )
+    assert code == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["frames"] == 48 and summary["retarget_rate_fps"] > 0
+    data = json.loads(out.read_text())
+    traj = JointTrajectory.from_dict(data)
+    assert traj.robot == "dual_ur5e" and traj.q.shape == (48, 20)
+    sim = traj.meta["sim"]
+    assert 0.0 <= sim["tracking_max_m"]["right"] < 0.1, sim
+
+
+def test_cli_rejects_bad_inputs(tmp_path: Path) -> None:
+    lonely = tmp_path / "clip.amc"
+    lonely.write_text(":DEGREES\n")
+    with pytest.raises(ConfigError, match="skeleton"):
+        _cli([str(lonely)])
+    other = tmp_path / "clip.txt"
+    other.write_text("x")
+    with pytest.raises(ConfigError, match=r"\.amc or \.bvh"):
+        _cli([str(other)])
+
+
+class _Probe(Node[Any]):
+    def __init__(self, transport: Transport) -> None:
+        super().__init__("probe", transport=transport)
+        self.trajs: list[Any] = []
+        self.reports: list[Any] = []
+        self.create_subscription(
+            "/robot/joint_trajectory", "trajectory_msgs/msg/JointTrajectory", self.trajs.append, QoS(depth=10)
+        )
+        self.create_subscription("/hsi/report", "hsi/msg/TaskReport", self.reports.append, QoS(depth=10))
+
+
+def _wrist_msg(task: str, segment: str, stamp: float, path: np.ndarray) -> Any:
+    n = path.shape[0]
+    return msg_class("hsi/msg/WristTrajectory")(
+        header=make_header(stamp, "world"),
+        task_id=task,
+        hand="right",
+        action="grasp",
+        segment=segment,
+        planner="minjerk",
+        object_name="can1",
+        time_from_start=np.linspace(0.0, 1.0, n),
+        poses=[make_pose(p) for p in path],
+        contact_index=n - 1 if segment == "approach" else 0,
+    )
+
+
+def test_retarget_node_turns_wrist_segments_into_a_joint_trajectory() -> None:
+    assert load_executable("retarget_node") is RetargetNode
+    transport = make_transport("inproc")
+    executor = Executor(transport, use_sim_time=True)
+    node = RetargetNode(transport=transport, parameters={"settle_s": 0.2})
+    probe = _Probe(transport)
+    for n in (node, probe):
+        executor.add_node(n)
+    pub = transport.publisher("/hsi/wrist_trajectory", "hsi/msg/WristTrajectory")
+    path = np.column_stack([np.linspace(0.4, 0.7, 21), np.full(21, -0.25), np.linspace(1.0, 0.9, 21)])
+    pub.publish(_wrist_msg("t1", "approach", 0.0, path))
+    pub.publish(_wrist_msg("t1", "leave", 1.0, path[::-1]))
+    bad = _wrist_msg("t1", "leave", 1.0, path)
+    bad.time_from_start = np.zeros(3)  # 3 times for 21 poses: ignored
+    pub.publish(bad)
+    executor.spin(duration_s=2.0, until=lambda: bool(probe.reports))
+    executor.shutdown()
+    assert node.ignored == 1
+    (msg,) = probe.trajs
+    traj = joint_trajectory_from_msg(msg, "dual_ur5e")
+    assert traj.q.shape[1] == 20 and traj.duration >= 2.0 - 1e-6
+    report = probe.reports[-1]
+    assert report.stage == "retarget" and report.success and report.task_id == "t1"
+    details = json.loads(report.details_json)
+    assert details["events"][0]["kind"] == "grasp" and report.max_tracking_error_m < 0.01
+    with pytest.raises(ConfigError, match="anchor"):
+        RetargetNode(transport=make_transport("inproc"), parameters={"anchor": "moon"})
