@@ -19,7 +19,7 @@ from hsi_planning.fields.descent import Descent, DescentConfig, descend, descend
 from hsi_planning.fields.distance import inverse_field, point_distance, target_distance
 from hsi_planning.fields.field_set import FieldSet, compute_fields
 from hsi_planning.fields.grid import GridSpec
-from hsi_planning.fields.occupancy import LabelledCloud, check_target_accessible, split_cloud, voxelize
+from hsi_planning.fields.occupancy import TargetObstaclePoints, check_target_accessible, split_cloud, voxelize
 from hsi_planning.fields.toa import DemoPath, demo_path, speed_field, time_of_arrival
 
 __all__ = [
@@ -31,7 +31,7 @@ __all__ = [
     "FieldJob",
     "FieldSet",
     "GridSpec",
-    "LabelledCloud",
+    "TargetObstaclePoints",
     "check_target_accessible",
     "compute_fields",
     "compute_many",

@@ -36,7 +36,7 @@ BoolArray = NDArray[np.bool_]
 
 
 @dataclass(frozen=True)
-class LabelledCloud:
+class TargetObstaclePoints:
     """The target and obstacle points picked from a labelled cloud.
 
     Attributes:
@@ -50,7 +50,7 @@ class LabelledCloud:
 
 def split_cloud(
     points: ArrayLike, labels: ArrayLike, target_labels: Sequence[int], obstacle_labels: Sequence[int]
-) -> LabelledCloud:
+) -> TargetObstaclePoints:
     """Validate a labelled cloud and pick its target and obstacle points (copies).
 
     Args:
@@ -93,7 +93,7 @@ def split_cloud(
     missing = sorted(obstacles - {int(v) for v in np.unique(lab[is_obstacle])})
     if missing:
         _LOG.debug("obstacle label(s) %s not present in the cloud", missing)
-    return LabelledCloud(target=pts[is_target], obstacles=pts[is_obstacle])
+    return TargetObstaclePoints(target=pts[is_target], obstacles=pts[is_obstacle])
 
 
 def occupancy_from_distance(
