@@ -347,3 +347,42 @@ def test_benchmark_quick_with_the_committed_checkpoint(tmp_path: Path, repo_root
     assert summary["cases"] == 6
     assert summary["success_rate"] >= 0.8, proc.stdout
     assert (tmp_path / "planner.md").read_text().startswith("# Implicit planner benchmark")
+
+
+# ------------------------------------------------------------------------------ target completion
+
+
+def _drawer_points() -> np.ndarray:
+    """A 40 × 40 cm drawer floor at z = 0.4 with 10 cm walls (1 cm spacing), seen from above."""
+    g = np.arange(0.0, 0.401, 0.01)
+    fx, fy = np.meshgrid(g, g, indexing="ij")
+    floor = np.stack([fx.ravel(), fy.ravel(), np.full(fx.size, 0.4)], axis=1)
+    h = np.arange(0.4, 0.501, 0.01)
+    wx, wz = np.meshgrid(g, h, indexing="ij")
+    walls = [np.stack([wx.ravel(), np.full(wx.size, y), wz.ravel()], axis=1) for y in (0.0, 0.4)] + [
+        np.stack([np.full(wx.size, x), wx.ravel(), wz.ravel()], axis=1) for x in (0.0, 0.4)
+    ]
+    return np.vstack([floor, *walls])
+
+
+def test_completion_extends_a_hidden_bottom_down_to_the_support_only() -> None:
+    from hsi_planning.implicit.completion import completed_bounds, furniture_mask, support_height
+
+    drawer = _drawer_points()
+    # Only the top cap (z 0.52..0.53) of a 13 cm can standing on the floor is seen; the floor right
+    # around it is hidden by packed neighbours (removed from the cloud).
+    rng = np.random.default_rng(0)
+    cap = np.column_stack([rng.uniform(0.17, 0.23, (40, 2)), rng.uniform(0.52, 0.53, 40)])
+    hidden = (np.abs(drawer[:, 0] - 0.2) < 0.07) & (np.abs(drawer[:, 1] - 0.2) < 0.07)
+    seen = drawer[~hidden]
+    assert support_height(cap, seen) == pytest.approx(0.4, abs=1e-6)
+    lo, hi = completed_bounds(cap, seen)
+    assert lo[2] == pytest.approx(0.4, abs=1e-6) and hi[2] == pytest.approx(cap[:, 2].max())
+    # Standing on observed furniture (the floor seen right below it): the visible bottom is kept.
+    low_can = cap - [0.0, 0.0, 0.115]
+    assert support_height(low_can, drawer) is None
+    # Furniture only: objects (by class) and the target itself are not support candidates.
+    labels = np.array([0, 1, 2, 2])
+    mask = furniture_mask(labels, {0: "drawer", 1: "can", 2: "bottle"}, [2])
+    assert mask.tolist() == [True, False, False, False]
+    assert furniture_mask(labels, None, [2]).tolist() == [True, True, False, False]

@@ -36,6 +36,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial.transform import Rotation
 
 from hsi_planning.errors import CloudError, PlanningError
+from hsi_planning.implicit.completion import completed_bounds, furniture_mask
 from hsi_planning.implicit.latent import LatentFitConfig, fit_latent, predict_fields
 from hsi_planning.implicit.path import Clearance, estimate_approach_axis
 from hsi_planning.implicit.planner_config import ImplicitPlannerConfig
@@ -264,18 +265,26 @@ class ImplicitPlanner:
                 f"the contact pose {contact.round(3).tolist()} [m] in front of {request.target!r} is inside "
                 "an obstacle; no free side to grasp it from along the approach axis"
             )
+        # The held object reaches down to its support where neighbours hide its bottom (packed drawers).
+        furniture = furniture_mask(labels, request.cloud.label_classes, ids)
+        held = completed_bounds(target_pts, points[furniture])
         ctx = SegmentContext(
             fields=fields,
             clearance=clearance,
             contact=contact,
             contact_clear=float(clearance(contact)[0]),
-            carried=box_samples(target_pts, cfg.carried_padding) - contact,
+            carried=box_samples(np.vstack(held), cfg.carried_padding) - contact,
             lift=0.0,
             config=cfg,
         )
         ctx = dataclasses.replace(ctx, lift=free_lift(ctx, cfg.lift_height, cfg.check_margin))
         plans: dict[str, SegmentPlan] = {}
-        info: dict[str, Any] = {"approach_axis": np.asarray(axis).tolist(), "contact": contact.tolist()}
+        info: dict[str, Any] = {
+            "approach_axis": np.asarray(axis).tolist(),
+            "contact": contact.tolist(),
+            "lift": ctx.lift,
+            "held_bounds": [np.asarray(b).tolist() for b in held],
+        }
         z: NDArray[np.float32] | None = None
         for seg in SEGMENTS:
             t0 = time.perf_counter()

@@ -1,0 +1,107 @@
+"""Completion of a partly seen target from the cloud: where its hidden bottom is.
+
+The cameras often see only the top of an object packed in a drawer (its neighbours hide the sides) or
+only the front of one on a shelf. Objects stand on a support, so the held object's extent reaches down
+to the **support surface** under it: the highest upward-facing horizontal surface of the furniture
+(labels whose class is not an object kind) below the visible part, near its footprint. Normals come
+from a local principal-component fit of the furniture points.
+
+Used for the held object's box (what must stay clear while carrying), not for the contact, which is
+placed from the visible points (:func:`~hsi_planning.implicit.prior.contact_point`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.spatial import cKDTree
+
+from hsi_planning.scene.spec import OBJECT_KINDS
+
+F64 = NDArray[np.float64]
+
+#: [m] how far around the visible footprint the support surface is searched (horizontally).
+SUPPORT_SEARCH = 0.10
+#: [m] the support lies at most this far below the visible bottom (taller objects are not modelled).
+SUPPORT_DROP = 0.30
+#: [m] a support must lie at least this far below the visible bottom (else the bottom was seen).
+SUPPORT_GAP = 0.01
+#: [m] furniture this close under the visible bottom (and its footprint) means the bottom was seen.
+SEEN_BOTTOM = 0.02
+#: [-] |n_z| of a horizontal surface's normal.
+_HORIZONTAL = 0.9
+#: [-] neighbours of the normal fit; [-] horizontal points needed in the support layer.
+_NEIGHBOURS, _MIN_LAYER = 10, 3
+
+
+def furniture_mask(
+    labels: ArrayLike, label_classes: dict[int, str] | None, exclude: ArrayLike
+) -> NDArray[np.bool_]:
+    """(N,) points of furniture: labels not in ``exclude`` whose class is not an object kind (every
+    non-excluded label when the cloud has no classes)."""
+    lab = np.asarray(labels).reshape(-1)
+    ok = ~np.isin(lab, np.asarray(exclude))
+    if label_classes:
+        objects = [k for k, c in label_classes.items() if c in OBJECT_KINDS]
+        ok &= ~np.isin(lab, objects)
+    return np.asarray(ok)
+
+
+def _normals_z(points: F64, tree_points: F64) -> F64:
+    """(M,) |n_z| of the local plane fitted through each of ``points`` and its nearest ``tree_points``."""
+    k = min(_NEIGHBOURS, tree_points.shape[0])
+    _, idx = cKDTree(tree_points).query(points, k=k)
+    nb = tree_points[np.asarray(idx).reshape(points.shape[0], k)]
+    centred = nb - nb.mean(axis=1, keepdims=True)
+    cov = np.einsum("mki,mkj->mij", centred, centred)
+    _, vec = np.linalg.eigh(cov)
+    return np.asarray(np.abs(vec[:, 2, 0]), dtype=np.float64)
+
+
+def support_height(target_points: ArrayLike, furniture_points: ArrayLike) -> float | None:
+    """[m] height of the support surface under a target seen as ``target_points`` (N, 3) [m], from the
+    ``furniture_points`` (M, 3) [m]; None when furniture lies right under the visible bottom (it was
+    seen standing on it) or no horizontal surface lies in the searched band (between
+    ``SUPPORT_GAP`` and ``SUPPORT_DROP`` below the visible bottom, within ``SUPPORT_SEARCH`` of the
+    footprint) — then the visible bottom is the best estimate."""
+    tp = np.asarray(target_points, dtype=np.float64).reshape(-1, 3)
+    fp = np.asarray(furniture_points, dtype=np.float64).reshape(-1, 3)
+    if tp.shape[0] == 0 or fp.shape[0] < _NEIGHBOURS:
+        return None
+    lo, hi = tp.min(axis=0), tp.max(axis=0)
+    under = (
+        (fp[:, :2] >= lo[:2] - SEEN_BOTTOM).all(axis=1)
+        & (fp[:, :2] <= hi[:2] + SEEN_BOTTOM).all(axis=1)
+        & (np.abs(fp[:, 2] - lo[2]) <= SEEN_BOTTOM)
+    )
+    if under.any():  # the target stands on observed furniture
+        return None
+    near = (
+        (fp[:, :2] >= lo[:2] - SUPPORT_SEARCH).all(axis=1)
+        & (fp[:, :2] <= hi[:2] + SUPPORT_SEARCH).all(axis=1)
+        & (fp[:, 2] <= lo[2] - SUPPORT_GAP)
+        & (fp[:, 2] >= lo[2] - SUPPORT_DROP)
+    )
+    cand = fp[near]
+    if cand.shape[0] < _MIN_LAYER:
+        return None
+    flat = cand[_normals_z(cand, fp) >= _HORIZONTAL]
+    if flat.shape[0] < _MIN_LAYER:
+        return None
+    z = np.sort(flat[:, 2])[::-1]
+    # The highest layer with enough horizontal points (a lone rim point does not make a surface).
+    layer = z[_MIN_LAYER - 1 :] >= z[: -(_MIN_LAYER - 1)] - 0.01
+    first = int(np.argmax(layer)) if layer.any() else None
+    return None if first is None else float(z[first])
+
+
+def completed_bounds(target_points: ArrayLike, furniture_points: ArrayLike) -> tuple[F64, F64]:
+    """(lo (3,), hi (3,)) [m] box of the target: its visible points' box extended down to the support
+    surface (:func:`support_height`) when one is found below it."""
+    tp = np.asarray(target_points, dtype=np.float64).reshape(-1, 3)
+    lo, hi = tp.min(axis=0), tp.max(axis=0)
+    z = support_height(tp, furniture_points)
+    if z is not None:
+        lo = lo.copy()
+        lo[2] = min(lo[2], z)
+    return lo, hi
