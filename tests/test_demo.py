@@ -1,4 +1,7 @@
-"""``hsi demo --test`` end to end (as a subprocess), its files, reruns and errors; ``hsi scene cloud``."""
+"""``hsi demo --test`` end to end (as a subprocess): the foundation files (scene MJCF, bag, cloud, picture),
+the pick-and-place reports (``report.json`` keys per task, ``report.md``), the trajectory plot and the video;
+reruns and errors; ``hsi scene cloud``. The demo runs with ``--planner reach_model`` (deterministic, no
+checkpoint needed); the default planner's results are in the demo's own report."""
 
 from __future__ import annotations
 
@@ -17,6 +20,7 @@ import pytest
 from hsi_nodes.bag import bag_topics, read_bag
 from hsi_nodes.cli import main as hsi_main
 from hsi_nodes.cli.scene_cloud import add_cloud_command
+from hsi_nodes.demo.summary import REQUIRED_KEYS
 from hsi_nodes.pointcloud2 import msg_to_cloud
 from hsi_planning.errors import CloudError
 from hsi_planning.perception import read_ply
@@ -29,7 +33,17 @@ def demo_out(tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("demo")
     env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
     proc = subprocess.run(
-        [sys.executable, "-m", "hsi_nodes.cli", "demo", "--test", "--out", str(out)],
+        [
+            sys.executable,
+            "-m",
+            "hsi_nodes.cli",
+            "demo",
+            "--test",
+            "--planner",
+            "reach_model",
+            "--out",
+            str(out),
+        ],
         capture_output=True,
         text=True,
         timeout=180,
@@ -38,12 +52,14 @@ def demo_out(tmp_path_factory: pytest.TempPathFactory) -> Path:
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "last cloud:" in proc.stdout and "callback errors: none" in proc.stdout
+    assert "planner reach_model, 1/1 tasks succeeded" in proc.stdout  # the printed summary
     return out
 
 
 def test_demo_writes_every_file(demo_out: Path) -> None:
     names = {p.name for p in demo_out.iterdir()}
     assert {"kitchen.xml", "kitchen", "kitchen_cloud.ply", "kitchen.png", "demo_summary.json"} <= names
+    assert {"report.json", "report.md", "demo.mp4", "plots"} <= names
     assert sorted(p.name for p in (demo_out / "kitchen").iterdir()) == ["kitchen.mcap", "metadata.yaml"]
 
 
@@ -88,11 +104,43 @@ def test_demo_png_and_mjcf(demo_out: Path) -> None:
     assert model.ncam == 2
 
 
+def test_demo_report_json_has_one_entry_per_task(demo_out: Path) -> None:
+    entries = json.loads((demo_out / "report.json").read_text())
+    assert isinstance(entries, list) and len(entries) == 1
+    entry = entries[0]
+    assert set(REQUIRED_KEYS) <= set(entry)
+    assert entry["object"] == "can1" and entry["robot"] == "dual_ur5e" and entry["planner"] == "reach_model"
+    assert entry["task"] == "counter_can" and entry["stage"] == "done"
+    assert isinstance(entry["success"], bool) and isinstance(entry["collisions"], int)
+    assert entry["duration_s"] > 5.0 and 0.0 <= entry["max_tracking_error_m"] < 0.1
+    assert entry["success"] is True and entry["placement_error_m"] < 0.02 and entry["collisions"] == 0
+    summary = json.loads((demo_out / "demo_summary.json").read_text())["pick_place"]
+    assert summary["succeeded"] == 1 and summary["tasks"] == [
+        {"task": "counter_can", "success": True, "stage": "done"}
+    ]
+    assert 0.0 < summary["wall_s"] < 120.0
+    text = (demo_out / "report.md").read_text()
+    assert "| counter_can | can1 | yes | done |" in text and "navigate to" in text
+
+
+def test_demo_plot_and_video(demo_out: Path) -> None:
+    plot = iio.imread(demo_out / "plots" / "counter_can.png")
+    assert plot.ndim == 3 and plot.shape[1] > 2 * plot.shape[0]  # three panels side by side
+    assert float(plot[..., :3].std()) > 10.0
+    video = demo_out / "demo.mp4"
+    assert video.stat().st_size > 10_000
+    frames = iio.imread(video)
+    assert frames.shape[1:] == (120, 160, 3) and frames.shape[0] > 40  # title card + the execution
+    motion = np.abs(frames[-1].astype(np.int16) - frames[frames.shape[0] // 2].astype(np.int16))
+    assert float(motion.mean()) > 0.5  # the robot moves between the frames
+
+
 def test_demo_reruns_into_the_same_folder_and_reports_errors(
     demo_out: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     before = (demo_out / "kitchen" / "kitchen.mcap").stat().st_mtime_ns
-    assert hsi_main(["demo", "--test", "--out", str(demo_out), "--duration", "0.1"]) == 0
+    fast = ["--planner", "linear", "--no-video"]
+    assert hsi_main(["demo", "--test", *fast, "--out", str(demo_out), "--duration", "0.1"]) == 0
     assert (demo_out / "kitchen" / "kitchen.mcap").stat().st_mtime_ns > before
     assert json.loads((demo_out / "demo_summary.json").read_text())["simulated_s"] == pytest.approx(0.1)
     capsys.readouterr()
@@ -105,6 +153,14 @@ def test_demo_reruns_into_the_same_folder_and_reports_errors(
     (foreign / "notes.txt").write_text("mine")
     assert hsi_main(["demo", "--test", "--out", str(tmp_path)]) == 1
     assert "not a bag" in capsys.readouterr().err and (foreign / "notes.txt").exists()
+    for bad, message in (
+        (["--planner", "teleport"], "available"),
+        (["--robot", "octopus"], "unknown robot"),
+        (["--tasks", "nope"], "unknown demo task"),
+    ):
+        assert hsi_main(["demo", "--test", *bad, "--out", str(tmp_path / "x")]) == 1
+        assert message in capsys.readouterr().err
+        assert not (tmp_path / "x").exists()  # refused before anything runs
 
 
 def test_scene_cloud_command_writes_labelled_ply(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -25,6 +25,8 @@ NODE_EXECUTABLES: dict[str, str] = {
     "scheduler_node": "hsi_nodes.nodes.scheduler_node:SchedulerNode",
     "planner_node": "hsi_nodes.nodes.planner_node:PlannerNode",
     "retarget_node": "hsi_nodes.nodes.retarget_node:RetargetNode",
+    "sim_check_node": "hsi_nodes.nodes.sim_check_node:SimCheckNode",
+    "click_player": "hsi_nodes.nodes.click_player_node:ClickPlayerNode",
 }
 
 

@@ -98,6 +98,7 @@ class SimCheckNode(Node[SimCheckNodeConfig]):
         self.executed = 0
         self.ignored = 0
         self.video: Any = None
+        self._last_recorder: Any = None
         if cfg.video:
             from pathlib import Path
 
@@ -200,7 +201,12 @@ class SimCheckNode(Node[SimCheckNodeConfig]):
             placement = info.placement if info.object_name else None
             goal = TaskGoal(info.object_name, placement=placement, planner=info.planner)
             hooks = [h for h in (self._states(), self._recorder(info)) if h is not None]
-            report = execute(world, full, goal=goal, on_frame=lambda w: [h(w) for h in hooks] and None)
+
+            def on_frame(w: Any) -> None:
+                for hook in hooks:
+                    hook(w)
+
+            report = execute(world, full, goal=goal, on_frame=on_frame)
         except (HsiError, ValueError, TypeError) as exc:
             self.get_logger().warning("task %s not executed: %s", task_id, exc)
             self._publish(task_id, info, None, f"{type(exc).__name__}: {exc}", time.perf_counter() - t0)
@@ -239,7 +245,8 @@ class SimCheckNode(Node[SimCheckNodeConfig]):
                 object_name=info.object_name,
                 robot=self.world.robot.name,
                 planner=info.planner,
-                placement_error_m=nan if report is None or report.placement_error_m is None
+                placement_error_m=nan
+                if report is None or report.placement_error_m is None
                 else float(report.placement_error_m),
                 duration_s=float(seconds),
                 collisions=0 if report is None else int(report.collisions),
