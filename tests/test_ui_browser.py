@@ -3,7 +3,9 @@
 The page is loaded, the can on the counter is clicked in the 3D view (the canvas pixel where the camera
 the browser reports sees it), then a free spot on the counter, then *Start task*; the test waits for
 success in the report panel, checks the published ``/clicked_point`` and ``/hsi/goal`` messages, and
-saves a screenshot that must not be blank. Runs in the fast mode (reach-model planner).
+saves a screenshot that must not be blank; the minimum-jerk comparison (the real baseline, planned on the
+learned segments' requests) is toggled on in the browser and must differ from the learned paths while
+sharing their end points. Runs in the fast mode (reach-model planner).
 """
 
 from __future__ import annotations
@@ -21,7 +23,8 @@ import pytest
 from PIL import Image
 
 from hsi_nodes.ui.app import SUCCESS_TEXT, UiApp, UiConfig
-from hsi_nodes.ui.scene_view import minimum_jerk_path, project_to_screen
+from hsi_nodes.ui.minjerk_overlay import minjerk_comparison
+from hsi_nodes.ui.scene_view import project_to_screen
 from hsi_nodes.ui.ui_node import CLICK_TYPE, GOAL_TYPE
 
 CHROMIUM = "/usr/bin/chromium"
@@ -45,7 +48,7 @@ def _free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def test_project_to_screen_and_minimum_jerk() -> None:
+def test_project_to_screen() -> None:
     # camera at the origin looking along +x (OpenCV: z forward = world x, y down = world -z)
     rot = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])  # columns: cam x, y, z in world
     w = 0.5 * np.sqrt(1.0 + np.trace(rot))
@@ -61,12 +64,6 @@ def test_project_to_screen_and_minimum_jerk() -> None:
     assert (u, v) == pytest.approx((0.5, 0.5))
     u, v = project_to_screen((2.0, -0.5, 0.5), np.zeros(3), wxyz, np.radians(60.0), 1.5)
     assert u > 0.5 and v < 0.5  # right of and above the centre
-    t = np.linspace(0.0, 2.0, 41)
-    path = minimum_jerk_path(t, np.zeros(3), np.array([1.0, 0.0, 0.0]))
-    assert path[0, 0] == pytest.approx(0.0) and path[-1, 0] == pytest.approx(1.0)
-    assert path[20, 0] == pytest.approx(0.5)
-    speed = np.gradient(path[:, 0], t)
-    assert speed[0] == pytest.approx(0.0, abs=1e-2) and speed.max() == pytest.approx(1.875 / 2.0, rel=0.02)
 
 
 @pytest.fixture(scope="module")
@@ -123,7 +120,10 @@ def test_browser_click_pick_place(app: UiApp, tmp_path: Path) -> None:
         _wait(lambda: app.busy or bool(app.outcomes), 10.0, page)
         assert app.outcomes or not app.start_task()  # one task at a time; the UI says so
         _wait(lambda: SUCCESS_TEXT in page.inner_text("body"), 60.0, page)
-        assert app.wait(10.0)
+        assert app.wait(60.0)  # the min-jerk comparison is planned after the task
+        assert not app.view.minjerk_handles[0].visible
+        page.get_by_text("Min-jerk comparison").click()
+        _wait(lambda: bool(app.minjerk.value), 10.0, page)
         close = page.locator("button.mantine-Notification-closeButton")
         if close.count():  # the "software WebGL" notice of headless Chromium
             close.first.click()
@@ -134,6 +134,7 @@ def test_browser_click_pick_place(app: UiApp, tmp_path: Path) -> None:
     outcome = app.outcomes[-1]
     assert outcome.report.success and outcome.report.placement_error_m is not None
     assert outcome.report.placement_error_m < 0.02
+    _check_minjerk(app)
     for sub in app.transport.subscriptions():
         sub.dispatch(100)
     kinds = [k for k, _ in received]
@@ -183,3 +184,32 @@ def test_cli_parser() -> None:
         "127.0.0.1",
         "kitchen",
     )
+
+
+def _resampled(path: np.ndarray, n: int = 100) -> np.ndarray:
+    s = np.linspace(0.0, 1.0, path.shape[0])
+    u = np.linspace(0.0, 1.0, n)
+    return np.stack([np.interp(u, s, path[:, k]) for k in range(3)], axis=1)
+
+
+def _check_minjerk(app: UiApp) -> None:
+    schedule = app.outcomes[-1].schedule
+    assert schedule is not None
+    n_seg = len(schedule.segments)
+    assert len(app.minjerk_paths) == n_seg >= 2 and f"min-jerk comparison: {n_seg} of {n_seg}" in (
+        app.report.content
+    )
+    handles = app.view.minjerk_handles
+    assert len(handles) == n_seg and all(h.visible for h in handles)  # toggled on in the browser
+    deviations = []
+    for path in app.minjerk_paths:
+        learned = schedule.segments[path.index].trajectory.position
+        assert np.array_equal(path.learned, learned)
+        # same end poses (the learned contact and retreat), a different path in between
+        assert np.linalg.norm(path.position[0] - learned[0]) < 1e-3
+        assert np.linalg.norm(path.position[-1] - learned[-1]) < 1e-3
+        gap = np.linalg.norm(_resampled(path.position) - _resampled(learned), axis=1)
+        deviations.append(float(gap.max()))
+    assert max(deviations) > 0.005, deviations
+    paths, errors = minjerk_comparison(schedule, [])  # nothing recorded: every segment is an error
+    assert paths == [] and len(errors) == n_seg and "no recorded learned plan" in errors[0]

@@ -7,9 +7,11 @@ target (highlighted), a click on a free support surface (with a target selected)
 *Start task* button publishes the ``/hsi/goal`` and runs the task through the demo pipeline
 (:func:`~hsi_nodes.demo.pipeline.run_task`: scheduler + planner -> retargeting -> MuJoCo) in a worker
 thread, so the UI stays live; the robot and objects are re-posed from the simulation while it runs.
-Afterwards the keyframes, the planned wrist paths (the minimum-jerk comparison when toggled), the
-robot's TCP paths, the task report and the speed profiles are shown; every error (a click on nothing,
-unknown object, unreachable place, planner or execution failure) appears in the status panel.
+Afterwards the keyframes, the planned wrist paths, the robot's TCP paths, the task report and the speed
+profiles are shown; then the minimum-jerk baseline is planned on the learned segments' own requests
+(:mod:`~hsi_nodes.ui.minjerk_overlay`, still in the worker) and drawn when its toggle is on. Every error
+(a click on nothing, unknown object, unreachable place, planner or execution failure, a baseline that
+fails) appears in the panel.
 """
 
 from __future__ import annotations
@@ -19,17 +21,20 @@ import logging
 import threading
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from hsi_nodes.ui.report_panel import SUCCESS_TEXT, report_markdown, speed_image
-from hsi_planning.errors import ConfigError, HsiError, PlanningError
+from hsi_nodes.ui.ui_config import UiConfig
+from hsi_planning.errors import HsiError, PlanningError
 
 if TYPE_CHECKING:
     from hsi_nodes.demo.pipeline import TaskOutcome
+    from hsi_nodes.ui.minjerk_overlay import MinJerkPath
+    from hsi_planning.planning import PlanRequest, PlanResult
+    from hsi_planning.scheduler import Schedule
     from hsi_retarget.sim_check import SimWorld
 
 __all__ = ["SUCCESS_TEXT", "UiApp", "UiConfig"]
@@ -37,42 +42,6 @@ __all__ = ["SUCCESS_TEXT", "UiApp", "UiConfig"]
 _log = logging.getLogger(__name__)
 
 F64 = NDArray[np.float64]
-
-
-@dataclass(frozen=True)
-class UiConfig:
-    """What the UI serves and how tasks run."""
-
-    scene: str = "kitchen"  #: built-in scene name or spec path [-]
-    robot: str = "dual_ur5e"  #: robot (``dual_ur5e``/``dual_arm`` or ``humanoid``) [-]
-    planner: str = "implicit"  #: default wrist planner (``hsi_nodes.demo.pipeline.DEMO_PLANNERS``) [-]
-    checkpoint: str = "models/planner.pt"  #: implicit planner checkpoint [path]
-    host: str = "127.0.0.1"  #: address the web server binds [-]
-    port: int = 8080  #: web server port [-]
-    fast: bool = False  #: reach-model planner (fast, for tests and quick looks) [-]
-    cloud_voxel: float = 0.01  #: voxel size of the rendered scene cloud [m]
-    frame_rate: float = 20.0  #: live robot redraws per wall second while a task runs [Hz]
-    max_cloud_points: int = 50000  #: scene cloud points sent to the browser (evenly strided) [-]
-
-    def __post_init__(self) -> None:
-        from hsi_nodes.demo.pipeline import DEMO_PLANNERS
-        from hsi_retarget.robots import robot_name
-
-        object.__setattr__(self, "robot", robot_name(self.robot))
-        if self.fast:
-            object.__setattr__(self, "planner", "reach_model")
-        if self.planner not in DEMO_PLANNERS:
-            raise ConfigError(f"UiConfig.planner={self.planner!r}; available: {list(DEMO_PLANNERS)}")
-        if not (
-            0 <= self.port < 65536
-            and self.cloud_voxel > 0.0
-            and self.frame_rate > 0.0
-            and self.max_cloud_points > 0
-        ):
-            raise ConfigError(
-                "UiConfig: port in [0, 65535], cloud_voxel > 0 m, frame_rate > 0 Hz, max_cloud_points > 0; "
-                f"got {self.port}, {self.cloud_voxel}, {self.frame_rate}, {self.max_cloud_points}"
-            )
 
 
 class UiApp:
@@ -112,6 +81,8 @@ class UiApp:
         self._worker: threading.Thread | None = None
         self.target, self.pick_point, self.place = "", None, None  # type: tuple[str, F64 | None, F64 | None]
         self.outcomes: list[TaskOutcome] = []
+        #: The last task's minimum-jerk comparison paths (empty until it is planned).
+        self.minjerk_paths: list[MinJerkPath] = []
         self._frames: list[tuple[F64, F64]] = []
         self._build_gui(DEMO_PLANNERS)
         self.server.scene.on_click()(self._on_click)
@@ -231,6 +202,7 @@ class UiApp:
         from hsi_nodes.demo.pipeline import make_demo_planner, run_task
         from hsi_nodes.demo.plots import tcp_paths
         from hsi_nodes.demo.tasks import DemoTask
+        from hsi_nodes.ui.minjerk_overlay import RecordingPlanner
 
         assert self.pick_point is not None and self.place is not None
         planner_name = str(self.planner.value)
@@ -241,7 +213,8 @@ class UiApp:
             self.node.publish_goal(f"ui_{n}", self.target, pick, place, planner=planner_name)
             self._say(f"task {n}: planning and executing **{self.target}** with `{planner_name}` ...")
             self.view.clear_plan()
-            planner = make_demo_planner(planner_name, self.config.checkpoint)
+            self.minjerk_paths = []
+            planner = RecordingPlanner(make_demo_planner(planner_name, self.config.checkpoint))
             task = DemoTask(
                 f"ui_{n}",
                 self.config.scene,
@@ -254,7 +227,7 @@ class UiApp:
             outcome = run_task(task, self.spec, self.cloud, planner, cfg, on_world=self._on_world)
             self.outcomes.append(outcome)
             if outcome.schedule is not None:
-                self.view.draw_schedule(outcome.schedule, bool(self.minjerk.value))
+                self.view.draw_schedule(outcome.schedule)
             tcp_t, tcp = tcp_paths(outcome)
             self.view.draw_robot_paths(tcp)
             image = speed_image(outcome, tcp_t, tcp)
@@ -262,16 +235,33 @@ class UiApp:
                 self.speeds.image = image
             self.report.content = report_markdown(outcome)
             ok = outcome.report.success
-            self._say(
-                f"task {n} done: success" if ok else f"task {n} failed: {outcome.error or 'see report'}",
-                not ok,
-            )
+            done = f"task {n} done: success" if ok else f"task {n} failed: {outcome.error or 'see report'}"
+            self._say(done, not ok)
+            if outcome.schedule is not None:
+                self._compare(outcome.schedule, planner.calls, done, ok)
         except Exception as exc:  # any failure is shown in the UI, which keeps running
             _log.exception("ui task failed")
             self.report.content = f"**Task failed**: {type(exc).__name__}: {exc}"
             self._say(f"{type(exc).__name__}: {exc}", True)
         finally:
             self.start.disabled = False
+
+    def _compare(
+        self, schedule: Schedule, calls: list[tuple[PlanRequest, PlanResult]], done: str, ok: bool
+    ) -> None:
+        """Plan the minimum-jerk baseline of ``schedule``'s learned segments and draw it (shown when the
+        toggle is on); its failures go to the report panel."""
+        from hsi_nodes.ui.minjerk_overlay import minjerk_comparison
+
+        self._say(f"{done}; planning the minimum-jerk comparison ...", not ok)
+        paths, errors = minjerk_comparison(schedule, calls)
+        self.minjerk_paths = paths
+        self.view.draw_minjerk(paths, bool(self.minjerk.value))
+        lines = [f"- min-jerk comparison: {len(paths)} of {len(schedule.segments)} segments"]
+        lines += [f"- min-jerk failure: {e}" for e in errors[:4]]
+        self.report.content = self.report.content + "\n" + "\n".join(lines)
+        note = f"{len(errors)} failed, see report" if errors else "toggle it to compare"
+        self._say(f"{done}; min-jerk comparison ready ({note})", not ok or bool(errors))
 
     def _on_world(self, world: SimWorld, target: str) -> Any:
         period, last = 1.0 / self.config.frame_rate, [0.0]

@@ -4,8 +4,8 @@ Every geom of a :class:`~hsi_retarget.sim_check.SimWorld` except planes (the flo
 viser mesh in its geom frame (boxes, spheres, capsules, cylinders, ellipsoids, meshes); :meth:`SceneView.
 update` re-poses the moving ones (robot, free objects, doors and drawers) from ``data.geom_xpos/xmat``.
 The labelled scene cloud, the selected target (highlighted), the placement marker, the schedule's
-keyframes, the planned wrist paths (learned and, when toggled, the minimum-jerk path between the same
-end points over the same time) and the robot's commanded TCP paths are drawn on top.
+keyframes, the planned wrist paths (learned and, when toggled, the minimum-jerk baseline planned on the
+same requests, :mod:`hsi_nodes.ui.minjerk_overlay`) and the robot's commanded TCP paths are drawn on top.
 
 Clicks are hit-tested against the scene's rest-state meshes (:func:`~hsi_planning.scene.scene_meshes`,
 floor excluded): :meth:`SceneView.hit` turns a camera ray into the clicked surface point [m].
@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import logging
 import threading
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 import mujoco
@@ -26,12 +26,13 @@ from numpy.typing import ArrayLike, NDArray
 if TYPE_CHECKING:
     import viser
 
+    from hsi_nodes.ui.minjerk_overlay import MinJerkPath
     from hsi_planning.perception import LabelledCloud
     from hsi_planning.scene import SceneSpec
     from hsi_planning.scheduler import Schedule
     from hsi_retarget.sim_check import SimWorld
 
-__all__ = ["SceneView", "label_colors", "minimum_jerk_path", "project_to_screen"]
+__all__ = ["SceneView", "label_colors", "project_to_screen"]
 
 _log = logging.getLogger(__name__)
 
@@ -47,17 +48,6 @@ def label_colors(labels: NDArray[np.int32]) -> NDArray[np.uint8]:
     rgb = np.stack([(ids * 97 + 40) % 200, (ids * 57 + 90) % 200, (ids * 151 + 60) % 200], axis=1) + 40
     rgb[ids < 0] = 150
     return np.asarray(rgb, dtype=np.uint8)
-
-
-def minimum_jerk_path(t: F64, start: F64, end: F64) -> F64:
-    """(T, 3) [m] the minimum-jerk straight path from ``start`` (3,) to ``end`` (3,) [m] over times
-    ``t`` (T,) [s] (fifth-order polynomial, zero speed and acceleration at both ends)."""
-    times = np.asarray(t, dtype=np.float64)
-    span = float(times[-1] - times[0]) if times.size > 1 else 1.0
-    s = (times - times[0]) / (span if span > 0.0 else 1.0)
-    blend = 10.0 * s**3 - 15.0 * s**4 + 6.0 * s**5
-    a, b = np.asarray(start, dtype=np.float64), np.asarray(end, dtype=np.float64)
-    return np.asarray(a[None, :] + blend[:, None] * (b - a)[None, :], dtype=np.float64)
 
 
 def project_to_screen(
@@ -236,9 +226,8 @@ class SceneView:
             name, segments, colors=color, thickness=width, thickness_units="screen"
         )
 
-    def draw_schedule(self, schedule: Schedule, show_minjerk: bool) -> None:
-        """Draw the schedule's wrist keyframes and planned wrist paths (and their minimum-jerk
-        counterparts, visible when ``show_minjerk``)."""
+    def draw_schedule(self, schedule: Schedule) -> None:
+        """Draw the schedule's wrist keyframes and planned (learned) wrist paths, replacing earlier ones."""
         self.clear_plan()
         with self._lock:
             frames = [k for k in schedule.keyframes if k.key_joint.endswith("wrist")]
@@ -256,10 +245,26 @@ class SceneView:
                     continue
                 color = _HAND_COLORS.get(traj.hand, (90, 90, 90))
                 self._drawn.append(self._line(f"/plan/learned/s{i}", traj.position, color, 3.0))
-                jerk = minimum_jerk_path(traj.t, traj.position[0], traj.position[-1])
-                handle = self._line(f"/plan/minjerk/s{i}", jerk, _MINJERK_COLORS.get(traj.hand, color), 2.0)
-                handle.visible = show_minjerk
+
+    def draw_minjerk(self, paths: Sequence[MinJerkPath], visible: bool) -> None:
+        """Draw the minimum-jerk comparison paths (replacing earlier ones), shown when ``visible``."""
+        with self._lock:
+            for handle in self._minjerk:
+                handle.remove()
+            self._minjerk = []
+            for path in paths:
+                if path.position.shape[0] < 2:
+                    continue
+                color = _MINJERK_COLORS.get(path.hand, (150, 150, 150))
+                handle = self._line(f"/plan/minjerk/s{path.index}", path.position, color, 2.0)
+                handle.visible = visible
                 self._minjerk.append(handle)
+
+    @property
+    def minjerk_handles(self) -> list[Any]:
+        """The drawn minimum-jerk line handles (a copy of the list)."""
+        with self._lock:
+            return list(self._minjerk)
 
     def show_minjerk(self, visible: bool) -> None:
         """Toggle the minimum-jerk comparison paths."""
