@@ -347,3 +347,25 @@ def test_launch_file_and_parameter_files(repo_root: Path) -> None:
     assert player == ClickPlayerConfig()
     with pytest.raises(ConfigError, match="robot"):
         SimCheckNodeConfig(robot="octopus")
+
+
+def test_counter_task_succeeds_through_the_launch_file(dual_arm: TaskOutcome, tmp_path: Path) -> None:
+    """The node path (scheduler_node publishes its segments; retarget_node deepens the grasps;
+    sim_check_node dwells) ends like the function path."""
+    from hsi_nodes.demo.launch_path import run_launch_tasks
+    from hsi_nodes.demo.runner import RunnerConfig
+
+    config = RunnerConfig(pipeline=PipelineConfig(robot="dual_arm", planner="reach_model"), video=None)
+    run = run_launch_tasks(demo_tasks("test", ("counter_can",)), tmp_path, config, echo=lambda _: None)
+    assert len(run.outcomes) == 1
+    outcome = run.outcomes[0]
+    assert outcome.stage == "done", outcome.report.failures
+    report = outcome.report
+    assert report.success and report.object == "can1" and report.collisions == 0
+    assert report.placement_error_m is not None and report.placement_error_m < 0.02
+    assert dual_arm.report.success
+    assert report.max_tracking_error_m == pytest.approx(dual_arm.report.max_tracking_error_m, abs=0.005)
+    assert outcome.trajectory is not None and dual_arm.trajectory is not None
+    dwell = dual_arm.trajectory.meta["gripper_dwell_s"]  # sim_check_node adds it after the topic
+    assert outcome.trajectory.duration + dwell == pytest.approx(dual_arm.trajectory.duration, abs=0.1)
+    assert (tmp_path / "plots" / "counter_can.png").exists()

@@ -6,8 +6,9 @@
    ``OUT/<scene>.png`` and ``OUT/demo_summary.json``. The recorded cloud is the scene cloud.
 2. Pick-and-place (:mod:`hsi_nodes.demo.runner`): the scripted clicks of the variant
    (:mod:`hsi_nodes.demo.tasks`; ``kitchen``: door-cabinet pick-and-place, drawer pick, narrow-shelf pick
-   with a blocker) each go through scheduler + planner -> retargeting -> the MuJoCo check, either as
-   function calls (default) or through the nodes of ``launch/sim_pick_place.launch.yaml`` (``--launch``).
+   with a blocker) each go through scheduler + planner -> retargeting -> the MuJoCo check, either through
+   the nodes of ``launch/sim_pick_place.launch.yaml`` (default; ``click_player`` sends the clicks) or as
+   plain function calls (``--functions``; same stages, plus per-stage wall times).
    Writes ``OUT/report.json`` (one entry per task), ``OUT/report.md``, ``OUT/plots/<task>.png`` and the
    video ``OUT/demo.mp4``, and prints a summary.
 
@@ -61,7 +62,8 @@ def run_demo(args: argparse.Namespace) -> dict[str, Any]:
     config = _config(args)  # validate robot and planner before the foundation runs
     settings = DemoSettings.for_run(args.duration, args.test)
     summary, cloud = run_foundation(args.scene, out, settings, echo=print)
-    if args.launch:
+    launch = not args.functions
+    if launch:
         from hsi_nodes.demo.launch_path import run_launch_tasks
 
         run = run_launch_tasks(tasks, out, config, echo=print)
@@ -76,7 +78,7 @@ def run_demo(args: argparse.Namespace) -> dict[str, Any]:
         "robot": config.pipeline.robot,
         "planner": config.pipeline.planner,
         "variant": variant,
-        "path": "launch" if args.launch else "pipeline",
+        "path": "launch" if launch else "pipeline",
         "wall_s": wall,
         "files": files,
     }
@@ -131,7 +133,15 @@ def register(sub: Any) -> None:
         metavar="S",
         help="simulated time of the foundation run [s] (default 1.0; 0.2 with --test)",
     )
-    parser.add_argument("--launch", action="store_true", help="run the tasks through the node launch file")
+    path = parser.add_mutually_exclusive_group()
+    path.add_argument(
+        "--launch", action="store_true", help="run the tasks through the node launch file (the default)"
+    )
+    path.add_argument(
+        "--functions",
+        action="store_true",
+        help="run the tasks as function calls instead of through the nodes",
+    )
     parser.add_argument("--no-video", action="store_true", help="skip the video")
     parser.add_argument("--test", action="store_true", help="smallest, fastest variant (for the tests)")
     parser.set_defaults(func=_run)

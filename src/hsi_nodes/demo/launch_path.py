@@ -14,6 +14,7 @@ import json
 import logging
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -106,7 +107,8 @@ def _outcome(task: DemoTask, taps: _Taps, config: RunnerConfig) -> TaskOutcome:
     if "sim" in got and str(got["sim"].details_json):
         details = json.loads(str(got["sim"].details_json))
         if "object" in details:
-            report = _report_from_dict(details)
+            # the demo's planner name (the nodes report the planner object's, e.g. human_reach_model)
+            report = replace(_report_from_dict(details), planner=cfg.planner)
             return TaskOutcome(task, report, "done", "", target, None, schedule, trajectory)
     for stage in reversed(_STAGES):
         if stage in got and not bool(got[stage].success):
@@ -118,11 +120,6 @@ def _outcome(task: DemoTask, taps: _Taps, config: RunnerConfig) -> TaskOutcome:
     done = [s for s in _STAGES if s in got]
     after = f"after the {done[-1]} stage" if done else "before any report"
     reason = f"the task stopped {after} in the launch run (no final report)"
-    if done and done[-1] == "schedule":
-        reason += (
-            "; retarget_node received no planned wrist segments on /hsi/wrist_trajectory "
-            "(scheduler_node publishes the schedule's keyframes only)"
-        )
     report = failed_report(task, target, cfg, reason)
     return TaskOutcome(task, report, "launch", reason, target, None, schedule, trajectory)
 
@@ -149,6 +146,12 @@ def run_launch_tasks(
             "tasks": "[" + ", ".join(names) + "]",
             "video": video,
         }
+        if config.video is not None:
+            v = config.video
+            overrides |= {
+                f"video_{k}": repr(getattr(v, k))
+                for k in ("width", "height", "every", "fps", "distance", "azimuth", "elevation")
+            }
         description = parse_launch_file(package_share() / LAUNCH_FILE, overrides)
         taps = _Taps(cfg.robot)
         with LaunchRunner(description, use_sim_time=True) as runner:

@@ -10,15 +10,17 @@ node's world knowledge: label names, what opens how, where hidden objects are.
 - A goal names its object (or gives ``pick_point``) and, with ``has_place``, where the object's bottom
   centre goes (``place_pose.position``); its ``hand`` restricts the grasping hand.
 
-Each schedule goes out as ``hsi/msg/Schedule`` on ``/hsi/schedule`` and a ``hsi/msg/TaskReport``
-(stage ``schedule``) on ``/hsi/report``. A click on nothing, on the floor or on fixed furniture, an
-unreachable target, or any other planning failure produces a report with ``success`` false and the
-reason, no schedule, and the node keeps running. The report's ``duration_s`` is the schedule's motion
+Each schedule goes out as ``hsi/msg/Schedule`` on ``/hsi/schedule``, then each of its planned wrist segments
+as ``hsi/msg/WristTrajectory`` on ``/hsi/wrist_trajectory`` (``segment_topic``; empty = none), stamped with
+the schedule's stamp plus the segment's start time (what ``retarget_node`` places them by), and a
+``hsi/msg/TaskReport`` (stage ``schedule``) on ``/hsi/report``. A click on nothing, on the floor or on fixed
+furniture, an unreachable target, or any other planning failure produces a report with ``success`` false and
+the reason, no schedule, and the node keeps running. The report's ``duration_s`` is the schedule's motion
 time on success and the compute time on failure; ``details_json`` holds the assignment, strategy, opened
 part, blockers, Eq. 24 cost and the step lines. The goal's ``planner`` field is not used (the node's
-``planner`` parameter is). Label names come from the scene spec's label table, so the cloud must be
-rendered from the same scene (``scene_cloud_node`` with the same ``scene``). The node assumes its
-schedules are executed: it keeps track of what each hand holds (``holding``: the start state).
+``planner`` parameter is). Label names come from the scene spec's label table, so the cloud must be rendered
+from the same scene (``scene_cloud_node`` with the same ``scene``). The node assumes its schedules are
+executed: it keeps track of what each hand holds (``holding``: the start state).
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ import numpy as np
 
 from hsi_nodes.msgs import make_header, make_pose, msg_class
 from hsi_nodes.node import Node
+from hsi_nodes.nodes.planner_node import trajectory_msg
 from hsi_nodes.pointcloud2 import msg_to_cloud
 from hsi_nodes.transport.base import QoS
 from hsi_planning.errors import ConfigError, HsiError, PlanningError
@@ -43,6 +46,7 @@ _CLICK = "geometry_msgs/msg/PointStamped"
 _GOAL = "hsi/msg/PickPlaceGoal"
 _SCHEDULE = "hsi/msg/Schedule"
 _KEYFRAME = "hsi/msg/Keyframe"
+_WRIST = "hsi/msg/WristTrajectory"
 _REPORT = "hsi/msg/TaskReport"
 
 
@@ -72,6 +76,8 @@ class SchedulerNodeConfig:
     goal_topic: str = "/hsi/goal"
     #: Output schedule topic [-].
     schedule_topic: str = "/hsi/schedule"
+    #: Output planned wrist segments, one message each; empty = not published [-].
+    segment_topic: str = "/hsi/wrist_trajectory"
     #: Report topic [-].
     report_topic: str = "/hsi/report"
 
@@ -143,6 +149,7 @@ class SchedulerNode(Node[SchedulerNodeConfig]):
         self.create_subscription(cfg.click_topic, _CLICK, self._on_click, 10)
         self.create_subscription(cfg.goal_topic, _GOAL, self._on_goal, 10)
         self.schedule_pub = self.create_publisher(cfg.schedule_topic, _SCHEDULE, 10)
+        self.segment_pub = self.create_publisher(cfg.segment_topic, _WRIST, 50) if cfg.segment_topic else None
         self.report_pub = self.create_publisher(cfg.report_topic, _REPORT, 10)
 
     # ------------------------------------------------------------------------------------- inputs
@@ -242,7 +249,7 @@ class SchedulerNode(Node[SchedulerNodeConfig]):
             error = {"error": type(exc).__name__}
             self._report(task_id, False, str(exc), obj=obj, seconds=time.perf_counter() - t0, details=error)
             return
-        self.schedule_pub.publish(schedule_msg(schedule, self.now(), self.config.frame_id))
+        self._publish_schedule(schedule)
         self._update_hands(task, schedule)
         self.scheduled += 1
         keys = ("assignment", "strategy", "part", "blockers", "deviation_cost")
@@ -251,6 +258,17 @@ class SchedulerNode(Node[SchedulerNodeConfig]):
         assignment = schedule.info.get("assignment")
         message = f"{len(schedule.keyframes)} keyframes over {schedule.duration:.2f} s: {assignment}"
         self._report(task_id, True, message, obj=obj, seconds=schedule.duration, details=details)
+
+    def _publish_schedule(self, schedule: Any) -> None:
+        """The schedule, then its planned segments stamped ``schedule stamp + start time`` [s]."""
+        stamp, frame = self.now(), self.config.frame_id
+        self.schedule_pub.publish(schedule_msg(schedule, stamp, frame))
+        if self.segment_pub is None:
+            return
+        for seg in schedule.segments:
+            self.segment_pub.publish(
+                trajectory_msg(seg.trajectory, schedule.task_id, stamp + seg.start_time, frame)
+            )
 
     def _update_hands(self, task: Any, schedule: Any) -> None:
         from hsi_planning.scheduler import HandState

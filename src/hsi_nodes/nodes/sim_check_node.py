@@ -52,6 +52,10 @@ class SimCheckNodeConfig:
     video_width: int = 320  #: video frame width [px]
     video_height: int = 240  #: video frame height [px]
     video_every: int = 8  #: render every k-th control step [-]
+    video_fps: float = 25.0  #: video playback rate [frames/s]
+    video_distance: float = 2.6  #: free camera distance from the task's target [m]
+    video_azimuth: float = 160.0  #: free camera azimuth [deg]
+    video_elevation: float = -35.0  #: free camera elevation [deg]
     frame_id: str = "world"  #: frame of the report headers [-]
     trajectory_topic: str = "/robot/joint_trajectory"  #: input joint trajectories [-]
     report_topic: str = "/hsi/report"  #: task reports (input: schedule/retarget; output: sim) [-]
@@ -72,6 +76,8 @@ class SimCheckNodeConfig:
             )
         if self.video_width < 16 or self.video_height < 16 or self.video_every < 1:
             raise ConfigError("SimCheckNodeConfig: video size >= 16 px and video_every >= 1")
+        if not (math.isfinite(self.video_fps) and self.video_fps > 0.0 and self.video_distance > 0.0):
+            raise ConfigError("SimCheckNodeConfig: video_fps > 0 frames/s and video_distance > 0 m")
 
 
 @dataclass
@@ -105,7 +111,15 @@ class SimCheckNode(Node[SimCheckNodeConfig]):
             from hsi_nodes.demo.video import DemoVideo
             from hsi_retarget.sim_check import VideoConfig
 
-            size = VideoConfig(width=cfg.video_width, height=cfg.video_height, every=cfg.video_every)
+            size = VideoConfig(
+                width=cfg.video_width,
+                height=cfg.video_height,
+                every=cfg.video_every,
+                fps=cfg.video_fps,
+                distance=cfg.video_distance,
+                azimuth=cfg.video_azimuth,
+                elevation=cfg.video_elevation,
+            )
             self.video = DemoVideo(Path(cfg.video), size)
         self.create_subscription(cfg.trajectory_topic, _JOINT_TRAJ, self._on_trajectory, 10)
         self.create_subscription(cfg.report_topic, _REPORT, self._on_report, 50)
