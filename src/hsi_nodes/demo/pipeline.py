@@ -263,12 +263,15 @@ def run_task(
     config: PipelineConfig,
     *,
     on_world: Callable[[SimWorld, str], FrameHook | None] | None = None,
+    on_schedule: Callable[[Schedule], None] | None = None,
 ) -> TaskOutcome:
     """Run ``task`` in ``spec`` observed as ``cloud`` (see the module docstring).
 
     Args:
         on_world: called with the task's MuJoCo world and its target before the execution; may return a
             per-frame callback (e.g. a video recorder).
+        on_schedule: called with the schedule as soon as it exists, before retargeting and execution
+            (e.g. to draw the keyframes and planned wrist paths while the robot moves).
     """
     from hsi_retarget.retarget import RetargetConfig, retarget
     from hsi_retarget.sim_check import TaskGoal, WorldConfig, build_world, execute
@@ -289,6 +292,8 @@ def run_task(
         stage = "schedule"
         schedule = Scheduler(world, planner, sched_cfg).schedule(request)
         timings["schedule"] = time.perf_counter() - t0
+        if on_schedule is not None:
+            on_schedule(schedule)
         stage = "retarget"
         t1 = time.perf_counter()
         robot_schedule = deepen_grasps(schedule, [o.name for o in spec.objects], config.grasp)

@@ -224,10 +224,16 @@ class UiApp:
             )
             cfg = dataclasses.replace(self._pipeline, planner=planner_name)
             self._frames = []
-            outcome = run_task(task, self.spec, self.cloud, planner, cfg, on_world=self._on_world)
+            outcome = run_task(
+                task,
+                self.spec,
+                self.cloud,
+                planner,
+                cfg,
+                on_world=self._on_world,
+                on_schedule=self.view.draw_schedule,
+            )
             self.outcomes.append(outcome)
-            if outcome.schedule is not None:
-                self.view.draw_schedule(outcome.schedule)
             tcp_t, tcp = tcp_paths(outcome)
             self.view.draw_robot_paths(tcp)
             image = speed_image(outcome, tcp_t, tcp)
