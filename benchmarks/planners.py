@@ -37,13 +37,23 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from _common import HUMAN_KEYS, Prepared, hdm05_approaches, human_metrics, prepare, sample_rate, score
-from human_reach import processed_approach
-from planner import TEST_SEED_START, make_cases
+from _common import (
+    HUMAN_KEYS,
+    Prepared,
+    failed,
+    hdm05_approaches,
+    human_metrics,
+    make_cases,
+    prepare,
+    processed_approach,
+    sample_rate,
+    score,
+)
 from planners_report import markdown, plot_paths, plot_speeds, summarize
 from tqdm import tqdm
 
 from hsi_planning.errors import HsiError
+from hsi_planning.implicit.problem import TEST_SEED_START
 from hsi_planning.metrics import dtw_distance
 from hsi_planning.minjerk import MinJerkPlanner
 from hsi_planning.planning import PlanResult, make_planner
@@ -112,9 +122,7 @@ def run_case(
         try:
             result = plan(prep, done)
         except HsiError as exc:
-            row.update(success=False, success_sphere=False, success_full_contact=False, planned=False)
-            row["error"] = str(exc)
-            row["seconds"] = time.perf_counter() - t0
+            row.update(failed(exc, t0))
             rows.append(row)
             _LOG.info("%s %s failed: %s", run, prep.case.tag, exc)
             continue
