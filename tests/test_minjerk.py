@@ -377,3 +377,57 @@ def test_target_in_a_closed_cage_fails_with_the_ipopt_status() -> None:
     with pytest.raises(PlanningError, match=r"approach of obj: .*return status \w+"):
         MinJerkPlanner(cfg).plan(req)
     assert time.perf_counter() - t0 < 10.0
+
+
+def test_carrying_leave_corridor_checks_the_held_object_in_its_pose_there(
+    scenes: dict[str, tuple[Any, LabelledCloud]],
+) -> None:
+    """Regression (issue 4): the corridor warm start of a carrying leave from a shelf board used to ask
+    every grid node to be free for the held object's start, middle and end offsets at once, so the nodes
+    around the support (where the object still has its start pose) were blocked and no corridor was found."""
+    from hsi_planning.minjerk.segment import SegmentSettings, SegmentSpec, build_fields, build_spheres
+    from hsi_planning.minjerk.warm_start import corridor_path
+
+    spec_scene, req = _request(scenes, "narrow_bottle2")
+    planner = MinJerkPlanner()
+    points, is_target, _ = planner._points(req)
+    contact, q_contact, _ = planner._contact(req, points, is_target, None, None)
+    start = np.asarray(req.start_position, dtype=np.float64)
+    target = points[is_target]
+    centre = 0.5 * (target.min(axis=0) + target.max(axis=0))
+    radius = float(np.linalg.norm(target - centre, axis=1).max())
+    settings = SegmentSettings()
+    grid, _ = build_fields(
+        points[~is_target],
+        target,
+        np.vstack([start, contact]),
+        settings,
+        reach=float(np.linalg.norm(centre - contact)),
+        held_radius=radius,
+    )
+    spec = SegmentSpec(
+        start=contact,
+        goal=start,
+        q_start=q_contact,
+        q_goal=req.quaternion,
+        duration=None,
+        grid=grid,
+        contact=contact,
+        q_contact=q_contact,
+        hand=req.hand,
+        action="grasp",
+        segment="leave",
+        held_centre=centre,
+        held_radius=radius,
+    )
+    spheres = build_spheres(spec, settings)
+    path = corridor_path(contact, start, spheres, MinJerkConfig())
+    assert path is not None
+    assert np.allclose(path[0], contact) and np.allclose(path[-1], start)
+    # against the ground truth: the held sphere (turning with the wrist) along the corridor, away from
+    # the support, keeps its radius less 1 cm of cloud sampling / grid error
+    field = _gt_field(spec_scene, req.target)
+    tau = np.linspace(0.0, 1.0, path.shape[0])
+    held = field.distance(spheres[1].centres(path, tau)) - radius
+    far = np.linalg.norm(path - contact, axis=1) > RELAX_ZONE
+    assert held[far].min() >= -0.01

@@ -31,7 +31,7 @@ from hsi_planning.errors import ConfigError, PlanningError
 from hsi_planning.minjerk.clearance import ClearanceSphere
 from hsi_planning.minjerk.optimizer import MinJerkConfig, MinJerkSolution, solve_min_jerk
 from hsi_planning.minjerk.sdf import DistanceGrid, distance_grid
-from hsi_planning.minjerk.warm_start import corridor_path, straight_is_clear
+from hsi_planning.minjerk.warm_start import corridor_path, path_is_clear, straight_is_clear
 from hsi_planning.trajectory import Action, Hand, Segment, WristTrajectory
 
 _LOG = logging.getLogger(__name__)
@@ -39,6 +39,9 @@ _LOG = logging.getLogger(__name__)
 F64 = NDArray[np.float64]
 #: Samples of the held object's offset track over the segment's normalized time.
 _OFFSET_SAMPLES = 21
+#: [m] a given warm start deeper than this in an obstacle is tried after the corridor (resampling and
+#: smoothing a collision-free reference moves it by a few mm).
+_GIVEN_TOLERANCE = 0.01
 
 
 @dataclass(frozen=True)
@@ -180,15 +183,29 @@ def build_spheres(spec: SegmentSpec, settings: SegmentSettings) -> tuple[Clearan
 def _guesses(
     spec: SegmentSpec, spheres: tuple[ClearanceSphere, ...], config: MinJerkConfig, settings: SegmentSettings
 ) -> Iterator[tuple[str, F64 | None]]:
-    """Warm starts to try, best first: given, straight (if clear), corridor, straight (if not yet)."""
-    if spec.initial is not None:
+    """Warm starts to try, best first: the collision-free ones (given, straight), the corridor, then the
+    colliding ones (IPOPT started inside an obstacle, e.g. a reference path that drags the held object
+    through its support, mostly stalls: ``Error_In_Step_Computation``, iteration or time limits)."""
+    duration = spec.duration or 1.0
+    given = spec.initial is not None and path_is_clear(
+        spec.initial,
+        spec.start,
+        spec.goal,
+        duration,
+        spheres,
+        config=config,
+        tolerance=_GIVEN_TOLERANCE,
+    )
+    if given:
         yield ("given", spec.initial)
-    clear = straight_is_clear(spec.start, spec.goal, spec.duration or 1.0, spheres, config)
+    clear = straight_is_clear(spec.start, spec.goal, duration, spheres, config)
     if clear:
         yield ("straight", None)
     corridor = corridor_path(spec.start, spec.goal, spheres, config)
     if corridor is not None:
         yield ("corridor", corridor)
+    if spec.initial is not None and not given:
+        yield ("given", spec.initial)
     if not clear:
         yield ("straight", None)
 

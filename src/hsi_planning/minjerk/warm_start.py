@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 
 from hsi_planning.minjerk.clearance import ClearanceSphere
 from hsi_planning.minjerk.optimizer import MinJerkConfig, margins
-from hsi_planning.minjerk.quintic import rest_to_rest
+from hsi_planning.minjerk.quintic import initial_spline
 
 _LOG = logging.getLogger(__name__)
 
@@ -31,9 +31,27 @@ def straight_is_clear(
     start: F64, goal: F64, duration: float, spheres: tuple[ClearanceSphere, ...], config: MinJerkConfig
 ) -> bool:
     """Whether the free-space minimum-jerk line meets every clearance constraint at the check points."""
-    line = rest_to_rest(start, goal, duration, config.knots)
-    worst = margins(line, spheres, config)
-    return bool(worst.size == 0 or worst.min() >= 0.0)
+    return path_is_clear(None, start, goal, duration, spheres, config=config)
+
+
+def path_is_clear(
+    path: F64 | None,
+    start: F64,
+    goal: F64,
+    duration: float,
+    spheres: tuple[ClearanceSphere, ...],
+    *,
+    config: MinJerkConfig,
+    tolerance: float = 0.0,
+) -> bool:
+    """Whether the optimizer's initial curve from ``path`` (N, 3) [m] (uniform in time; None = the
+    straight minimum-jerk line) meets every clearance constraint at the check points, less ``tolerance``
+    [m]."""
+    curve = initial_spline(
+        path, start, goal, duration, knots=config.knots, smoothing=config.warm_start_smoothing
+    )
+    worst = margins(curve, spheres, config)
+    return bool(worst.size == 0 or worst.min() >= -tolerance)
 
 
 def _free(
@@ -46,18 +64,25 @@ def _free(
     cubic: bool = True,
 ) -> NDArray[np.bool_]:
     """(N,) whether wrist positions (N, 3) meet every sphere's (relaxed) requirement + ``cushion`` (not
-    near the ends) for the sphere offsets at the start, middle and end of the segment (time unknown)."""
+    near the ends), each sphere offset at the normalized time guessed by :func:`_progress`."""
     ok = np.ones(points.shape[0], dtype=bool)
+    tau = _progress(points, ends)
     for s in spheres:
         relaxed = s.relaxed_ends(ends[0], ends[1], config.relax_slack)
-        for tau in (0.0, 0.5, 1.0):
-            centres = s.centres(points, np.full(points.shape[0], tau))
-            need = s.requirement(centres, relaxed, config.relax_slope)
-            ok &= s.field.contains(centres)
-            ok &= s.field.interpolate(centres, cubic=cubic) >= need + cushion * (need >= s.required - 1e-9)
-            if s.offsets.shape[0] == 1:
-                break
+        centres = s.centres(points, tau)
+        need = s.requirement(centres, relaxed, config.relax_slope)
+        ok &= s.field.contains(centres)
+        ok &= s.field.interpolate(centres, cubic=cubic) >= need + cushion * (need >= s.required - 1e-9)
     return ok
+
+
+def _progress(points: F64, ends: list[F64]) -> F64:
+    """(N,) [-] normalized time guessed for wrist positions (N, 3) [m]: the share of the way from the
+    start, |p − start| / (|p − start| + |p − goal|), so a turning held object is checked in the pose it
+    has there (at the start in its start pose, near the goal in its goal pose)."""
+    d0 = np.linalg.norm(points - ends[0], axis=1)
+    d1 = np.linalg.norm(points - ends[1], axis=1)
+    return np.asarray(d0 / np.maximum(d0 + d1, 1e-12), dtype=np.float64)
 
 
 def _shortcut(
