@@ -167,7 +167,7 @@ def train_planner(
         "test_seed_start": TEST_SEED_START,
         "train": {
             "build_seconds": round(build_s, 1),
-            "train_seconds": round(result.seconds, 1),
+            "train_seconds": round(result.seconds, 3),
             "total_seconds": round(time.perf_counter() - t0, 1),
             "points_per_second": round(result.points_per_second, 1),
             "final_losses": final,
