@@ -15,7 +15,18 @@ from collections.abc import Sequence
 
 from hsi_planning.errors import HsiError
 
-_COMMAND_MODULES = ("scene", "launch", "record", "demo", "schedule", "plan", "train", "retarget", "ui", "bench")
+_COMMAND_MODULES = (
+    "scene",
+    "launch",
+    "record",
+    "demo",
+    "schedule",
+    "plan",
+    "train",
+    "retarget",
+    "ui",
+    "bench",
+)
 
 
 def build_parser() -> argparse.ArgumentParser:
