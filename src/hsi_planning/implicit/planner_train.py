@@ -90,7 +90,9 @@ def quick_config(config: PlannerTrainConfig) -> PlannerTrainConfig:
         actions=("grasp",),
         workers=1,
     )
-    tiny = AutoDecoderConfig(latent_dim=8, n_layers=2, width=32, skip_layer=1, channels=config.channels)
+    tiny = dataclasses.replace(
+        config.train.model, latent_dim=8, n_layers=2, width=32, skip_layer=1, channels=config.channels
+    )
     train_cfg = dataclasses.replace(
         config.train, model=tiny, steps=20, batch_size=2, points_per_sample=256, lr_decay_every=10
     )
@@ -166,9 +168,9 @@ def train_planner(
         "train_seeds": [TRAIN_SEEDS.start, TRAIN_SEEDS.stop - 1],
         "test_seed_start": TEST_SEED_START,
         "train": {
-            "build_seconds": round(build_s, 1),
+            "build_seconds": round(build_s, 2),
             "train_seconds": round(result.seconds, 3),
-            "total_seconds": round(time.perf_counter() - t0, 1),
+            "total_seconds": round(time.perf_counter() - t0, 2),
             "points_per_second": round(result.points_per_second, 1),
             "final_losses": final,
             "loss_curve": _curve(result.history["loss"], config.loss_curve_points),
