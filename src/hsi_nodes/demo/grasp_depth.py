@@ -16,6 +16,7 @@ mapping has a grasp-depth option.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Collection
 from dataclasses import dataclass
 
@@ -25,7 +26,6 @@ from scipy.spatial.transform import Rotation
 
 from hsi_planning.errors import ConfigError
 from hsi_planning.scheduler import Keyframe, PlannedSegment, Schedule
-from hsi_planning.trajectory import WristTrajectory
 
 __all__ = ["GraspDepthConfig", "deepen_grasps", "grasp_offsets"]
 
@@ -126,18 +126,7 @@ def deepen_grasps(
         tr = s.trajectory
         axes = Rotation.from_quat(tr.quaternion).as_matrix()[:, :, 0]
         shift = _offset_at(breaks[tr.hand], s.start_time + tr.t)
-        moved = WristTrajectory(
-            t=tr.t,
-            position=tr.position + shift[:, None] * axes,
-            quaternion=tr.quaternion,
-            hand=tr.hand,
-            action=tr.action,
-            segment=tr.segment,
-            contact_index=tr.contact_index,
-            planner=tr.planner,
-            object_name=tr.object_name,
-            meta=dict(tr.meta),
-        )
+        moved = dataclasses.replace(tr, position=tr.position + shift[:, None] * axes)
         segments.append(PlannedSegment(s.start_time, moved, s.step))
     info = {**schedule.info, "grasp_offset_m": cfg.offset}
     return Schedule(

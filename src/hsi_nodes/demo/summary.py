@@ -15,20 +15,12 @@ from pathlib import Path
 from typing import Any
 
 from hsi_nodes.demo.pipeline import TaskOutcome
+from hsi_retarget.sim_check.report import REPORT_KEYS
 
 __all__ = ["REQUIRED_KEYS", "format_summary", "write_summary"]
 
 #: Keys every ``report.json`` entry has (the issue's list).
-REQUIRED_KEYS: tuple[str, ...] = (
-    "object",
-    "robot",
-    "planner",
-    "success",
-    "placement_error_m",
-    "duration_s",
-    "collisions",
-    "max_tracking_error_m",
-)
+REQUIRED_KEYS: tuple[str, ...] = REPORT_KEYS
 
 
 def _num(value: Any, digits: int = 3) -> str:

@@ -12,6 +12,7 @@ carried segment is the right hand's, the left hand following it at a fixed offse
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -42,18 +43,7 @@ def bottom_centre(points: F64) -> F64:
 
 
 def _retimed(tr: WristTrajectory, duration: float) -> WristTrajectory:
-    return WristTrajectory(
-        t=tr.t * (duration / tr.duration),
-        position=tr.position,
-        quaternion=tr.quaternion,
-        hand=tr.hand,
-        action=tr.action,
-        segment=tr.segment,
-        contact_index=tr.contact_index,
-        planner=tr.planner,
-        object_name=tr.object_name,
-        meta=tr.meta,
-    )
+    return dataclasses.replace(tr, t=tr.t * (duration / tr.duration))
 
 
 def _follower(

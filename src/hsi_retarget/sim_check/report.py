@@ -144,7 +144,8 @@ class ExecutionReport:
         return "\n".join(lines) + "\n"
 
 
-_COLUMNS = (
+#: Keys every task entry of a report has (the issue's list), in table-column order.
+REPORT_KEYS: tuple[str, ...] = (
     "object",
     "robot",
     "planner",
@@ -158,10 +159,10 @@ _COLUMNS = (
 
 def reports_markdown(reports: list[ExecutionReport], title: str = "Execution in MuJoCo") -> str:
     """One Markdown table of the main fields of ``reports``, then each report's details."""
-    lines = [f"## {title}", "", "| " + " | ".join(_COLUMNS) + " |", "|" + "---|" * len(_COLUMNS)]
+    lines = [f"## {title}", "", "| " + " | ".join(REPORT_KEYS) + " |", "|" + "---|" * len(REPORT_KEYS)]
     for r in reports:
         row = r.to_dict()
-        lines.append("| " + " | ".join(_num(row[c]) for c in _COLUMNS) + " |")
+        lines.append("| " + " | ".join(_num(row[c]) for c in REPORT_KEYS) + " |")
     successes = sum(r.success for r in reports)
     lines += ["", f"Success: {successes}/{len(reports)}", ""]
     return "\n".join(lines) + "\n" + "\n".join(r.to_markdown() for r in reports)
