@@ -118,6 +118,33 @@ class PlanRequest:
             raise PlanningError(f"invalid point cloud: {exc}") from exc
         return cls(cloud=cloud, target=target, **kwargs)
 
+    def target_points(self) -> tuple[NDArray[np.float64], NDArray[np.int64], list[int]]:
+        """The cloud as the planners see it: points (N, 3) [m], labels (N,) and the target's label ids.
+
+        For ``place`` with a ``place_position``, the held object's points are moved to the placement.
+
+        Raises:
+            PlanningError: the target (or an ``object_labels`` name) is not a label of the cloud, or it
+                has no point in it (hidden or out of view).
+        """
+        ids = []
+        for name in (self.target, *self.object_labels):
+            try:
+                ids.append(self.cloud.label_id(name))
+            except CloudError as exc:
+                raise PlanningError(f"target {name!r} is not a label of the cloud: {exc}") from exc
+        points = np.asarray(self.cloud.points, dtype=np.float64)
+        labels = np.asarray(self.cloud.labels, dtype=np.int64)
+        if not np.isin(labels, ids).any():
+            raise PlanningError(f"target {self.target!r} has no point in the cloud (hidden or out of view)")
+        if self.action == "place" and self.place_position is not None:
+            from hsi_planning.implicit.problem import move_label_to
+
+            for i in ids:
+                if (labels == i).any():
+                    points = move_label_to(points, labels, i, self.place_position)
+        return points, labels, ids
+
     @property
     def quaternion(self) -> NDArray[np.float64]:
         """(4,) [x y z w] start orientation (identity when none was given)."""

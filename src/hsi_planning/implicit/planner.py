@@ -48,7 +48,6 @@ from hsi_planning.implicit.problem import (
     feature_dim,
     local_feature,
     make_problem,
-    move_label_to,
     problem_fields,
 )
 from hsi_planning.implicit.runtime_field import (
@@ -187,32 +186,10 @@ class ImplicitPlanner:
                 kwargs["start_quaternion"] = pose[3:]
         return PlanRequest(cloud=cloud, target=target, hand=hand, action=action, **kwargs)
 
-    @staticmethod
-    def _label(cloud: LabelledCloud, name: str) -> int:
-        try:
-            return cloud.label_id(name)
-        except CloudError as exc:
-            raise PlanningError(f"target {name!r} is not a label of the cloud: {exc}") from exc
-
     def _prepare(self, request: PlanRequest) -> tuple[F64, NDArray[np.int64], list[int], F64]:
         """(points, labels, target ids, retreat) with the cloud cropped to the planning region."""
-        cloud = request.cloud
-        ids = [self._label(cloud, request.target), *(self._label(cloud, n) for n in request.object_labels)]
-        points = np.asarray(cloud.points, dtype=np.float64)
-        labels = np.asarray(cloud.labels, dtype=np.int64)
+        points, labels, ids = request.target_points()
         is_target = np.isin(labels, ids)
-        if not is_target.any():
-            raise PlanningError(
-                f"target {request.target!r} has no point in the cloud (hidden or out of view)"
-            )
-        if request.action == "place" and request.place_position is not None:
-            for i in ids:
-                points = (
-                    move_label_to(points, labels, i, request.place_position)
-                    if (labels == i).any()
-                    else points
-                )
-            is_target = np.isin(labels, ids)
         w = np.asarray(request.start_position, dtype=np.float64)
         retreat = w if request.retreat_position is None else np.asarray(request.retreat_position)
         tp = points[is_target]

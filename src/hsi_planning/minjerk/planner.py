@@ -32,7 +32,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial.transform import Rotation
 
-from hsi_planning.errors import CloudError, ConfigError, PlanningError
+from hsi_planning.errors import ConfigError, PlanningError
 from hsi_planning.minjerk.optimizer import MinJerkConfig
 from hsi_planning.minjerk.segment import SegmentSettings, SegmentSpec, build_fields, plan_segment
 from hsi_planning.perception.cloud import LabelledCloud
@@ -222,26 +222,8 @@ class MinJerkPlanner:
     @staticmethod
     def _points(request: PlanRequest) -> tuple[F64, NDArray[np.bool_], list[int]]:
         """World points (N, 3) [m], the target mask (N,) and the target label ids."""
-        cloud = request.cloud
-        ids = []
-        for name in (request.target, *request.object_labels):
-            try:
-                ids.append(cloud.label_id(name))
-            except CloudError as exc:
-                raise PlanningError(f"target {name!r} is not a label of the cloud: {exc}") from exc
-        points = np.asarray(cloud.points, dtype=np.float64)
-        labels = np.asarray(cloud.labels, dtype=np.int64)
+        points, labels, ids = request.target_points()
         is_target = np.isin(labels, ids)
-        if not is_target.any():
-            raise PlanningError(
-                f"target {request.target!r} has no point in the cloud (hidden or out of view)"
-            )
-        if request.action == "place" and request.place_position is not None:
-            from hsi_planning.implicit.problem import move_label_to
-
-            for i in ids:
-                if (labels == i).any():
-                    points = move_label_to(points, labels, i, request.place_position)
         return points, is_target, ids
 
     def _contact(
