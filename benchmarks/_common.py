@@ -56,7 +56,9 @@ DTW_SAMPLES = 50  #: [-] samples of a normalized trajectory compared by DTW
 @dataclass(frozen=True)
 class Case:
     """One benchmark problem: the first of ``targets`` (seeded order) visible in the rendered cloud is
-    planned for (the start pose is completed from its position)."""
+    planned for (the start pose is completed from its position). Targets are reachable in one reach
+    (:func:`~hsi_planning.scene.target_reachable` with ``direct``): one behind a blocker needs the
+    scheduler's move of the blocker first (tested with the scheduler), not a single approach."""
 
     tag: str
     spec: SceneSpec
@@ -76,7 +78,7 @@ def make_cases(n_layouts: int, seed: int) -> list[Case]:
             for i, layout in enumerate(
                 generate_layouts(spec, per_group, seed, LayoutConfig(reshape=reshape))
             ):
-                names = [o.name for o in layout.objects if target_reachable(layout, o.name)]
+                names = [o.name for o in layout.objects if target_reachable(layout, o.name, direct=True)]
                 if names:
                     order = tuple(names[int(k)] for k in rng.permutation(len(names)))
                     noise = rng.normal(0.0, 0.03, 3)

@@ -1,8 +1,10 @@
 """Benchmark of the implicit planner on unseen layouts (seeds ≥ 100000, all three scene families).
 
-Per layout: one reachable target that the cameras see (seeded pick, ≥ 10 cloud points), rendered with
-its container opened (as the scheduler would), a hand (alternating), grasp, a free start pose near the
-body like the training demonstrations (the person stands at (0, target y) facing +x); the planner gets
+Per layout: one target reachable in a single reach (no other object in its corridor: one behind a
+blocker needs the scheduler to move the blocker first) that the cameras see (seeded pick, ≥ 10 cloud
+points), rendered with its container opened (as the scheduler would), a hand (alternating), grasp, a
+free start pose near the body like the training demonstrations (the person stands at (0, target y)
+facing +x); the planner gets
 the labelled cloud and the approach axis from the spec. Checked against the **ground-truth meshes**
 (open3d distance, :class:`hsi_planning.demos.ObstacleField`, every mesh but the target's):
 

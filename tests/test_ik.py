@@ -218,12 +218,17 @@ def test_tcp_jacobian_matches_finite_differences(robots: dict[str, RobotModel], 
     assert np.allclose(jac, numeric, atol=1e-5)
 
 
-def test_spheres_cover_forearm_wrist_gripper_and_finger_tips(robots: dict[str, RobotModel]) -> None:
+def test_spheres_cover_the_arms_gripper_and_finger_tips(robots: dict[str, RobotModel]) -> None:
     for robot in robots.values():
         spheres = robot_spheres(robot)
         frames = np.array(spheres.frames)
         assert "right_gripper_link" in frames and any(f.startswith("right_forearm") for f in frames)
-        assert not any("upper_arm" in f or "shoulder" in f for f in frames)  # the arm from the elbow out
+        upper = {f for f, p in zip(frames, spheres.proximal, strict=True) if p}  # upper arm (and shoulder)
+        assert any("upper_arm" in f for f in upper) and not any("forearm" in f for f in upper)
+        pairs = spheres.pairs()  # the upper arm is kept off the other arm, not off the body it hangs from
+        body = set(spheres.of("body").tolist())
+        assert not any(spheres.proximal[a] and b in body for a, b in pairs.tolist())
+        assert any(spheres.proximal[a] and spheres.proximal[b] for a, b in pairs.tolist())
         assert set(frames[spheres.tips]) == {f"{s}_finger_{k}" for s in SIDES for k in "ab"}
         assert all(len(spheres.of(g)) > 0 for g in ("left", "right", "body"))
         assert np.all(spheres.radii > 0.0)

@@ -17,8 +17,6 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from hsi_nodes.demo.dwell import DwellConfig, add_gripper_dwell
-from hsi_nodes.demo.grasp_depth import GraspDepthConfig, deepen_grasps, grasp_offsets
 from hsi_nodes.demo.pipeline import PipelineConfig, TaskOutcome, make_demo_planner, resolve_task, run_task
 from hsi_nodes.demo.runner import scene_cloud
 from hsi_nodes.demo.summary import REQUIRED_KEYS
@@ -39,7 +37,10 @@ from hsi_planning.errors import ConfigError, PlanningError
 from hsi_planning.perception import LabelledCloud
 from hsi_planning.scene_paths import load_scene
 from hsi_planning.scheduler import SceneWorld
+from hsi_retarget.grasp_depth import GraspDepthConfig, grasp_windows, shape_grasps
+from hsi_retarget.gripper_dwell import DwellConfig, add_gripper_dwell
 from hsi_retarget.joint_trajectory import ContactEvent, JointTrajectory
+from hsi_retarget.sources import human_motion_from_schedule
 
 _REPORT = "hsi/msg/TaskReport"
 _GOAL = "hsi/msg/PickPlaceGoal"
@@ -106,29 +107,74 @@ def test_clicks_resolve_against_the_cloud(kitchen_cloud: LabelledCloud) -> None:
 # ---------------------------------------------------------------------------- grasp depth and dwell
 
 
-def test_grasp_depth_moves_object_grasps_along_the_wrist_axis(dual_arm: TaskOutcome) -> None:
+def _angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """[rad] rotation angles between (..., 3, 3) rotations."""
+    rel = np.einsum("...ji,...jk->...ik", a, b)
+    return np.asarray(np.arccos(np.clip((np.trace(rel, axis1=-2, axis2=-1) - 1.0) / 2.0, -1.0, 1.0)))
+
+
+def test_gripper_goals_around_the_grasps(dual_arm: TaskOutcome) -> None:
     schedule = dual_arm.schedule
     assert schedule is not None
-    cfg = GraspDepthConfig(palm_offset=0.06, grasp_depth=0.03)
-    deep = deepen_grasps(schedule, ["can1"], cfg)
-    grasp = next(k for k in schedule.events() if k.contact_event == "grasp")
-    hand = grasp.key_joint
-    moved = next(k for k in deep.keyframes if k.key_joint == hand and k.time == grasp.time)
-    axis = Rotation.from_quat(grasp.quaternion).as_matrix()[:, 0]
-    np.testing.assert_allclose(moved.position - grasp.position, 0.09 * axis, atol=1e-9)
+    cfg = GraspDepthConfig(palm_offset=0.06, grasp_depth=0.03, standoff=0.08, lift=0.01)
+    motion = human_motion_from_schedule(schedule, 60.0)
+    windows = grasp_windows(schedule, ["can1"], cfg)
+    assert [(w.kind, w.target, w.free) for w in windows] == [
+        ("grasp", "can1", True),
+        ("release", "can1", True),
+    ]
+    grasp, release = windows
+    shaped = shape_grasps(motion, windows, cfg)
+    side, t = grasp.hand, motion.t
+    p0, r0 = motion.wrist_position[side], motion.wrist_rotation[side]
+    p1, r1 = shaped.wrist_position[side], shaped.wrist_rotation[side]
+    key = next(k for k in schedule.events() if k.contact_event == "grasp")
+    axis = Rotation.from_quat(key.quaternion).as_matrix()[:, 0]
     assert axis[2] < -0.99  # a counter object is grasped from above: the TCP goes 9 cm further down
-    first = next(k for k in deep.keyframes if k.key_joint == hand)
-    np.testing.assert_allclose(first.position, schedule.of(hand)[0].position)  # free hand: untouched
-    times, values = grasp_offsets(schedule, hand.removesuffix("_wrist"), {"can1"}, cfg)
-    assert values.max() == pytest.approx(0.09) and values[0] == 0.0 and values[-1] == 0.0
-    assert np.all(np.diff(times) >= 0.0)
-    untouched = deepen_grasps(schedule, [], cfg)  # no free object named: nothing moves
-    for a, b in zip(untouched.keyframes, schedule.keyframes, strict=True):
-        np.testing.assert_array_equal(a.position, b.position)
-    for a, b in zip(untouched.segments, schedule.segments, strict=True):
-        np.testing.assert_array_equal(a.trajectory.position, b.trajectory.position)
+    i_g = int(np.argmin(np.abs(t - grasp.time)))
+    goal = key.position + 0.09 * axis
+    np.testing.assert_allclose(p1[i_g], goal, atol=1e-6)
+    # the straight final approach: on the approach axis through the grasp, in the contact orientation
+    start, end = grasp.before
+    straight = min(max(cfg.straight_min_s, cfg.grasp_straight * (end - start)), 0.6 * (end - start))
+    line = (t >= end - straight + 1e-9) & (t <= end)
+    assert line.sum() >= 10
+    off_axis = np.cross(p1[line] - goal, axis)
+    assert np.abs(off_axis).max() < 1e-6
+    along = (p1[line] - goal) @ axis
+    assert -cfg.standoff - 1e-6 <= along.min() < -0.01 and np.all(np.diff(along) >= -1e-9)
+    approach = (t >= start) & (t <= end)  # the line starts at the pre-grasp pose, standoff before the grasp
+    assert np.linalg.norm(p1[approach] - (goal - cfg.standoff * axis), axis=1).min() < 1e-3
+    assert _angle(r1[line], r0[i_g]).max() < 1e-6
+    # the first retreat after the grasp lifts the object straight back along the axis (+ lift)
+    a0, a1 = grasp.after
+    post = goal - 0.08 * axis + [0.0, 0.0, 0.01]
+    lifting = (t >= a0) & (t <= a1)
+    reached = np.linalg.norm(p1[lifting] - post, axis=1)
+    assert reached.min() < 1e-3
+    k = int(np.argmin(reached))
+    assert np.abs(np.cross(p1[lifting][: k + 1] - goal, axis)[:, :2]).max() < 0.011  # straight up first
+    # carried: the gripper keeps the grasp orientation (grasp and release are both top-down here), while
+    # the planned wrist turns more
+    carry = (t > grasp.time) & (t < release.time)
+    assert _angle(r1[carry], r1[i_g]).max() < _angle(r0[carry], r0[i_g]).max()
+    # untouched before the approach and after the withdrawal of the release; smooth everywhere
+    before = t < start - 1e-9
+    np.testing.assert_array_equal(p1[before], p0[before])
+    after = t > release.after[1] + 1e-9
+    np.testing.assert_allclose(p1[after], p0[after], atol=1e-12)
+    planned_step = np.linalg.norm(np.diff(p0, axis=0), axis=1).max()  # [m] per 1/60 s
+    assert np.linalg.norm(np.diff(p1, axis=0), axis=1).max() < 1.5 * planned_step
+    assert _angle(r1[1:], r1[:-1]).max() < 0.2
+    other = "right" if side == "left" else "left"
+    np.testing.assert_array_equal(shaped.wrist_position[other], motion.wrist_position[other])
+    # a handle (not a free object): no depth
+    handle = shape_grasps(motion, grasp_windows(schedule, [], cfg), cfg)
+    np.testing.assert_allclose(handle.wrist_position[side][i_g], key.position, atol=1e-6)
     with pytest.raises(ConfigError, match="grasp_depth"):
         GraspDepthConfig(grasp_depth=-0.01)
+    with pytest.raises(ConfigError, match="grasp_straight"):
+        GraspDepthConfig(grasp_straight=0.9)
 
 
 def test_gripper_dwell_holds_still_and_shifts_the_rest() -> None:
@@ -255,13 +301,14 @@ def test_sim_check_node_executes_the_retargeted_schedule(
     """The scheduler's side is played by the test (schedule, its segments, the report, the goal); the real
     retarget_node makes the joint trajectory and sim_check_node executes it."""
     transport, executor = bus
-    retarget = RetargetNode(transport=transport, parameters={"scene": "kitchen", "require_schedule": True})
+    params = {"scene": "kitchen", "require_schedule": True, "deepen_grasps": True}
+    retarget = RetargetNode(transport=transport, parameters=params)
     sim = SimCheckNode(transport=transport, parameters={"scene": "kitchen", "joint_state_rate": 10.0})
     probe = _Probe(transport)
     for node in (retarget, sim, probe):
         executor.add_node(node)
     assert dual_arm.schedule is not None
-    schedule = deepen_grasps(dual_arm.schedule, ["can1"])  # robot-ready grasp goals, as in the pipeline
+    schedule = dual_arm.schedule  # the node makes the gripper goals, as the pipeline does
     transport.publisher("/hsi/goal", _GOAL).publish(goal_msg(COUNTER, 0.0, "world"))
     transport.publisher("/hsi/report", _REPORT).publish(_report("counter_can", "schedule", True, "can1"))
     transport.publisher("/hsi/schedule", "hsi/msg/Schedule").publish(schedule_msg(schedule, 1.0, "world"))

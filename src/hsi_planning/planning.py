@@ -25,6 +25,8 @@ from hsi_planning.trajectory import ACTIONS, HANDS, Action, Hand, WristTrajector
 PLANNER_NAMES: tuple[str, ...] = ("implicit", "minjerk")
 #: Wrist orientation used when a request gives no start orientation: x forward, z up (identity).
 DEFAULT_START_QUATERNION: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)
+#: [m] labels this far around the target, start and retreat are completed (the planning grid's reach).
+COMPLETION_REACH = 0.7
 
 
 def _vec(value: ArrayLike | None, n: int, name: str) -> NDArray[np.float64] | None:
@@ -54,6 +56,8 @@ class PlanRequest:
         place_position: (3,) [m] for ``place``: bottom centre of the held object at its placement; None =
             the object's points in ``cloud`` already show it at its placement.
         object_labels: extra label names that belong to the target (e.g. parts of one object).
+        complete: fill in the hidden parts of shelf boards and other objects from the labels' classes
+            (:mod:`~hsi_planning.implicit.scene_completion`) before planning.
     """
 
     cloud: LabelledCloud
@@ -66,6 +70,7 @@ class PlanRequest:
     retreat_position: NDArray[np.float64] | None = None
     place_position: NDArray[np.float64] | None = None
     object_labels: tuple[str, ...] = ()
+    complete: bool = True
 
     def __post_init__(self) -> None:
         if not isinstance(self.cloud, LabelledCloud):
@@ -121,7 +126,9 @@ class PlanRequest:
     def target_points(self) -> tuple[NDArray[np.float64], NDArray[np.int64], list[int]]:
         """The cloud as the planners see it: points (N, 3) [m], labels (N,) and the target's label ids.
 
-        For ``place`` with a ``place_position``, the held object's points are moved to the placement.
+        With ``complete`` the hidden parts of shelf boards and of the other objects are filled in
+        (:func:`~hsi_planning.implicit.scene_completion.complete_cloud`). For ``place`` with a
+        ``place_position``, the held object's points are moved to the placement.
 
         Raises:
             PlanningError: the target (or an ``object_labels`` name) is not a label of the cloud, or it
@@ -137,6 +144,21 @@ class PlanRequest:
         labels = np.asarray(self.cloud.labels, dtype=np.int64)
         if not np.isin(labels, ids).any():
             raise PlanningError(f"target {self.target!r} has no point in the cloud (hidden or out of view)")
+        if self.complete:
+            from hsi_planning.implicit.scene_completion import complete_cloud
+
+            held = points[np.isin(labels, ids)]
+            reach = np.vstack([held, self.start_position[None]])
+            if self.retreat_position is not None:
+                reach = np.vstack([reach, self.retreat_position[None]])
+            points, labels = complete_cloud(
+                points,
+                labels,
+                self.cloud.label_classes,
+                ids,
+                label_names=self.cloud.label_names,
+                region=(reach.min(axis=0) - COMPLETION_REACH, reach.max(axis=0) + COMPLETION_REACH),
+            )
         if self.action == "place" and self.place_position is not None:
             from hsi_planning.implicit.problem import move_label_to
 

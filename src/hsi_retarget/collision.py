@@ -1,12 +1,14 @@
 """Collision geometry for the IK margins: spheres on the robot's links, a distance query to the scene, and
 the linearized distance constraints of the closest sphere pairs (:func:`collision_rows`).
 
-Spheres are derived from the robot description's collision primitives: for each arm, every link from the
-elbow joint's link outwards (forearm, wrist, gripper body, and the fingers as *tip* spheres, which get a
-smaller scene margin since they must get close to what they grasp), and for the body the links that carry
-the arms (torso, pelvis/base) with their fixed children (head). A capsule/cylinder becomes spheres of its
-radius along its axis, a box spheres of its smallest half extent over its two larger axes (a finger box:
-spheres of its middle half extent along its longest axis). Distances to the scene come from an Open3D
+Spheres are derived from the robot description's collision primitives: for each arm, the links between
+the body and the elbow joint (upper arm, shoulder, mount; *proximal*: kept off the scene and the other
+arm, but not checked against the body they hang from) and every link from the elbow joint's link outwards
+(forearm, wrist, gripper body, and the fingers as *tip* spheres, which get a smaller scene margin since
+they must get close to what they grasp), and for the body the links that carry the arms (torso,
+pelvis/base) with their fixed children (head). A capsule/cylinder becomes spheres of its radius along its
+axis, a box spheres of its smallest half extent over its two larger axes (a finger box: spheres of its
+middle half extent along its longest axis). Distances to the scene come from an Open3D
 ``RaycastingScene`` of the scene's world-frame meshes (closest point; negative when the point lies clearly
 behind the closest triangle, i.e. inside a closed mesh).
 """
@@ -42,6 +44,8 @@ class SphereSet:
         radii: (S,) [m].
         groups: (S,) group code, index into :data:`GROUPS`.
         tips: (S,) True for finger spheres.
+        proximal: (S,) True for upper-arm spheres (no arm-vs-body pairs).
+        fixed: (S,) True for spheres on an arm's mount (no joint: no pairs with the other arm's mount).
     """
 
     frame_ids: I64
@@ -50,6 +54,8 @@ class SphereSet:
     radii: F64
     groups: I64
     tips: NDArray[np.bool_]
+    proximal: NDArray[np.bool_]
+    fixed: NDArray[np.bool_]
 
     def of(self, group: str) -> I64:
         """Indices of the spheres of ``group`` (``left``, ``right`` or ``body``)."""
@@ -66,12 +72,15 @@ class SphereSet:
         return np.asarray(np.einsum("sij,sj->si", rot, self.centers) + pos)
 
     def pairs(self) -> I64:
-        """(P, 2) sphere index pairs checked for self-collision: left arm vs right arm, each arm vs body."""
+        """(P, 2) sphere index pairs checked for self-collision: left arm vs right arm, each arm below its
+        upper arm vs body."""
         left, right, body = self.of("left"), self.of("right"), self.of("body")
+        distal = [a[~self.proximal[a]] for a in (left, right)]
         blocks = [
             np.array(np.meshgrid(a, b, indexing="ij")).reshape(2, -1).T
-            for a, b in ((left, right), (left, body), (right, body))
+            for a, b in ((left, right), (distal[0], body), (distal[1], body))
         ]
+        blocks[0] = blocks[0][~(self.fixed[blocks[0][:, 0]] & self.fixed[blocks[0][:, 1]])]
         return np.concatenate(blocks).astype(np.int64) if blocks else np.zeros((0, 2), dtype=np.int64)
 
 
@@ -120,11 +129,17 @@ def robot_spheres(robot: RobotModel, max_per_axis: int = 6) -> SphereSet:
     owner = {j.name: link.name for link in desc.links for j in link.joints}
     selected: list[tuple[str, str]] = []  # (link, group)
     arm_roots: set[str] = set()
+    upper: set[str] = set()
     for side in ("left", "right"):
         joints = robot.arm_joints[side]
         elbow = next((j for j in joints if "elbow" in j), joints[len(joints) // 2])
         start = owner[elbow]
         arm_roots.add(str(links[owner[joints[0]]].parent))
+        parent = links[start].parent
+        while parent is not None and links[parent].group == side:  # upper arm, shoulder, arm mount
+            upper.add(parent)
+            selected.append((parent, side))
+            parent = links[parent].parent
         chain = {start}
         for link in desc.links:  # parents come first: one pass collects the subtree
             if link.parent in chain:
@@ -144,12 +159,14 @@ def robot_spheres(robot: RobotModel, max_per_axis: int = 6) -> SphereSet:
         if link.parent in carriers and not link.joints and link.group == "body"
     }
     selected += [(n, "body") for n in sorted(carriers)]
-    frame_ids, frames, centers, radii, groups, tips = [], [], [], [], [], []
+    frame_ids, frames, centers, radii, groups, tips, proximal, fixed = [], [], [], [], [], [], [], []
     for name, group in selected:
         finger = any(j.name in finger_joints for j in links[name].joints)
         for geom in links[name].geoms:
             for centre, radius in _geom_spheres(geom, max_per_axis, finger):
                 tips.append(finger)
+                proximal.append(name in upper)
+                fixed.append(name in upper and not links[name].joints)
                 frame_ids.append(robot.model.getFrameId(name, pin.FrameType.BODY))
                 frames.append(name)
                 centers.append(centre)
@@ -164,6 +181,8 @@ def robot_spheres(robot: RobotModel, max_per_axis: int = 6) -> SphereSet:
         np.array(radii, dtype=np.float64),
         np.array(groups, dtype=np.int64),
         np.array(tips, dtype=bool),
+        np.array(proximal, dtype=bool),
+        np.array(fixed, dtype=bool),
     )
 
 

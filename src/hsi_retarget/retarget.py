@@ -27,6 +27,7 @@ from hsi_planning.errors import ConfigError, RetargetError
 from hsi_planning.mocap import lowpass
 from hsi_planning.trajectory import WristTrajectory
 from hsi_retarget.collision import SceneDistance
+from hsi_retarget.grasp_depth import GraspDepthConfig, grasp_windows, shape_grasps
 from hsi_retarget.human_motion import SIDES, HumanMotion
 from hsi_retarget.humanoid_ik import SupportConfig, plan_footsteps
 from hsi_retarget.ik import IKConfig, IKSolver, IKTargets
@@ -67,6 +68,9 @@ class RetargetConfig:
     sample_rate: float = 60.0  #: [Hz] sampling of schedules and wrist trajectories
     reach_tolerance: float = 0.01  #: [m] IK position residual above which a goal is reported unreached
     hip: tuple[float, float, float] = (0.0, 0.0, 0.0)  #: hip (x [m], y [m], yaw [rad]) for wrist-only input
+    #: Gripper goals around the grasps and releases of a schedule (:mod:`hsi_retarget.grasp_depth`);
+    #: ``None``: the planned wrist goals as they are.
+    grasp: GraspDepthConfig | None = None
 
     def __post_init__(self) -> None:
         if self.iterations_per_frame < 1 or self.initial_iterations < 1:
@@ -79,11 +83,24 @@ class RetargetConfig:
             )
 
 
-def _human_motion(source: Source, cfg: RetargetConfig) -> HumanMotion:
+def _free_objects(scene: Any, motion: HumanMotion) -> list[str]:
+    """Names of the free objects: the scene spec's, else the event targets that are no furniture part."""
+    objects = getattr(scene, "objects", None)
+    if objects is not None:
+        return [str(o.name) for o in objects]
+    return sorted({e.object_name for e in motion.events if e.object_name and "/" not in e.object_name})
+
+
+def _human_motion(source: Source, cfg: RetargetConfig, scene: Any = None) -> HumanMotion:
     if isinstance(source, HumanMotion):
         return source
     if hasattr(source, "keyframes") and hasattr(source, "segments"):  # a Schedule
-        return human_motion_from_schedule(cast("Schedule", source), cfg.sample_rate)
+        schedule = cast("Schedule", source)
+        motion = human_motion_from_schedule(schedule, cfg.sample_rate)
+        if cfg.grasp is not None:
+            windows = grasp_windows(schedule, _free_objects(scene, motion), cfg.grasp)
+            motion = shape_grasps(motion, windows, cfg.grasp)
+        return motion
     segments = [source] if isinstance(source, WristTrajectory) else list(source)
     if not all(isinstance(s, WristTrajectory) for s in segments):
         raise RetargetError("retarget() takes a HumanMotion, a Schedule or WristTrajectory segments")
@@ -214,7 +231,8 @@ def retarget(
             :class:`Schedule`, or planned :class:`WristTrajectory` segments.
         robot: a :class:`RobotModel` or a robot name (``dual_ur5e``/``dual_arm``, ``humanoid``).
         scene: a scene spec (its meshes become collision margins; objects named in the events are left
-            out), a :class:`SceneDistance`, or ``None`` (no scene margins).
+            out; its objects are the free ones of ``config.grasp``), a :class:`SceneDistance`, or ``None``
+            (no scene margins).
         config: :class:`RetargetConfig`.
 
     Returns:
@@ -223,7 +241,7 @@ def retarget(
     """
     cfg = config or RetargetConfig()
     model = robot if isinstance(robot, RobotModel) else RobotModel(robot)
-    motion = _human_motion(source, cfg)
+    motion = _human_motion(source, cfg, scene)
     mapping = cfg.mapping or MappingConfig(anchor="shoulder" if motion.shoulder_position else "world")
     t0 = time.perf_counter()
     goals = map_to_robot(motion, model, mapping)

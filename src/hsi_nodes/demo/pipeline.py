@@ -13,10 +13,11 @@ Steps:
    click with the picked object held, so its own points do not block the spot);
 2. :class:`~hsi_planning.scheduler.Scheduler` with the robot's footprint radius as the body radius (the
    root path keeps the base clear of the furniture) schedules the pick-and-place;
-3. the wrist goals of object grasps are moved into the objects (:mod:`hsi_nodes.demo.grasp_depth`),
-   :func:`~hsi_retarget.retarget.retarget` maps the schedule onto the robot (root keyframes -> base x, y,
-   yaw and the torso lift from the hip for the dual arm; the pelvis for the humanoid) and the robot
-   stands still while its fingers close or open (:mod:`hsi_nodes.demo.dwell`);
+3. :func:`~hsi_retarget.retarget.retarget` maps the schedule onto the robot (root keyframes -> base x,
+   y, yaw and the torso lift from the hip for the dual arm; the pelvis for the humanoid) with gripper
+   goals around the grasps (:mod:`hsi_retarget.grasp_depth`: into the objects, straight final approach
+   and first retreat, carried objects turning smoothly), and the robot stands still while its fingers
+   close or open (:mod:`hsi_retarget.gripper_dwell`);
 4. :func:`~hsi_retarget.sim_check.execute` runs the trajectory in a fresh MuJoCo world of the scene at
    rest (each task is an episode of its own), judged against the placement; the largest opening of the
    door or drawer the schedule opens is recorded.
@@ -32,8 +33,6 @@ from typing import Any
 
 import numpy as np
 
-from hsi_nodes.demo.dwell import DwellConfig, add_gripper_dwell
-from hsi_nodes.demo.grasp_depth import GraspDepthConfig, deepen_grasps
 from hsi_nodes.demo.tasks import DemoTask
 from hsi_planning.errors import ConfigError, HsiError, PlanningError
 from hsi_planning.perception import CloudConfig, LabelledCloud
@@ -41,6 +40,8 @@ from hsi_planning.planning import Planner
 from hsi_planning.scene import SceneSpec
 from hsi_planning.scheduler import PickGoal, SceneWorld, Schedule, Scheduler, SchedulerConfig, Task
 from hsi_planning.scheduler.planners import SCHEDULER_PLANNERS, scheduler_planner
+from hsi_retarget.grasp_depth import GraspDepthConfig
+from hsi_retarget.gripper_dwell import DwellConfig, add_gripper_dwell
 from hsi_retarget.joint_trajectory import JointTrajectory
 from hsi_retarget.robots import robot_name
 from hsi_retarget.sim_check import ExecutionConfig, ExecutionReport, SimWorld
@@ -52,6 +53,7 @@ __all__ = [
     "TaskOutcome",
     "make_demo_planner",
     "resolve_task",
+    "robot_trajectory",
     "run_task",
 ]
 
@@ -77,7 +79,7 @@ class PipelineConfig:
     voxel_size: float = 0.01  #: voxel size of the scheduler's predicted clouds (opened parts) [m]
     body_radius: float = 0.0  #: scheduler body radius; 0 = the robot's :data:`ROBOT_BODY_RADIUS` [m]
     sample_rate: float = 60.0  #: retargeting sample rate of the schedule [Hz]
-    grasp: GraspDepthConfig = field(default_factory=GraspDepthConfig)  #: TCP depth of object grasps [m]
+    grasp: GraspDepthConfig = field(default_factory=GraspDepthConfig)  #: gripper goals around grasps [m]
     dwell: DwellConfig = field(default_factory=DwellConfig)  #: standstills at gripper events [s]
     execution: ExecutionConfig = field(default_factory=ExecutionConfig)  #: MuJoCo check settings
 
@@ -243,6 +245,19 @@ def resolve_task(task: DemoTask, world: SceneWorld, config: SchedulerConfig) -> 
     )
 
 
+def robot_trajectory(schedule: Schedule, spec: SceneSpec, config: PipelineConfig) -> JointTrajectory:
+    """``schedule`` on ``config.robot`` in ``spec``: retargeted with the gripper goals around its grasps
+    (``config.grasp``), standing still at the gripper events (``config.dwell``).
+
+    Raises:
+        RetargetError: the robot cannot follow the schedule (see :func:`~hsi_retarget.retarget.retarget`).
+    """
+    from hsi_retarget.retarget import RetargetConfig, retarget
+
+    retarget_config = RetargetConfig(sample_rate=config.sample_rate, grasp=config.grasp)
+    return add_gripper_dwell(retarget(schedule, config.robot, spec, retarget_config), config.dwell)
+
+
 def _opening_hook(world: SimWorld, part: str, inner: FrameHook | None) -> tuple[FrameHook, list[float]]:
     best = [0.0]
 
@@ -273,7 +288,6 @@ def run_task(
         on_schedule: called with the schedule as soon as it exists, before retargeting and execution
             (e.g. to draw the keyframes and planned wrist paths while the robot moves).
     """
-    from hsi_retarget.retarget import RetargetConfig, retarget
     from hsi_retarget.sim_check import TaskGoal, WorldConfig, build_world, execute
 
     timings: dict[str, float] = {}
@@ -296,11 +310,7 @@ def run_task(
             on_schedule(schedule)
         stage = "retarget"
         t1 = time.perf_counter()
-        robot_schedule = deepen_grasps(schedule, [o.name for o in spec.objects], config.grasp)
-        retargeted = retarget(
-            robot_schedule, config.robot, spec, RetargetConfig(sample_rate=config.sample_rate)
-        )
-        trajectory = add_gripper_dwell(retargeted, config.dwell)
+        trajectory = robot_trajectory(schedule, spec, config)
         timings["retarget"] = time.perf_counter() - t1
         stage = "execute"
         t2 = time.perf_counter()

@@ -5,9 +5,10 @@ Inputs: ``/hsi/wrist_trajectory`` (``hsi/msg/WristTrajectory``, one per planned 
 retargeted once nothing new arrived for it for ``settle_s`` (and, with ``require_schedule``, once its schedule
 is known). With a schedule, the wrist segments are placed at ``segment stamp - schedule stamp`` and the hip
 keyframes drive the base/pelvis; without one, the segments play one after the other per hand from a hip
-standing at ``hip``. With ``deepen_grasps`` (needs ``scene``), the wrist goals of grasps of the scene's
-objects go ``palm_offset + grasp_depth`` further along the approach, so a parallel gripper closes around
-the object (:func:`hsi_nodes.demo.grasp_depth.deepen_grasps`, as in the demo's function path).
+standing at ``hip``. With ``deepen_grasps``, the wrist goals around the grasps of a schedule become
+gripper goals (:mod:`hsi_retarget.grasp_depth`, as in the demo's function path): the TCP goes
+``palm_offset + grasp_depth`` into a free object of the scene, the last ``standoff`` of an approach and the
+first of a retreat are straight along the approach axis, and a carried object turns smoothly.
 Output: ``/robot/joint_trajectory`` (``trajectory_msgs/msg/JointTrajectory``; a floating root appears as
 seven pseudo-joints ``root_joint/x`` ... ``root_joint/qw``) and a ``hsi/msg/TaskReport``
 (stage ``retarget``) whose ``details_json`` carries the gripper events, unreachable goals and time scaling.
@@ -23,11 +24,11 @@ from typing import Any
 
 import numpy as np
 
-from hsi_nodes.demo.grasp_depth import GraspDepthConfig, deepen_grasps
 from hsi_nodes.msgs import make_header, msg_class, pose_to_arrays, stamp_to_seconds
 from hsi_nodes.node import Node
 from hsi_planning.errors import ConfigError, HsiError
 from hsi_planning.trajectory import WristTrajectory
+from hsi_retarget.grasp_depth import GraspDepthConfig
 from hsi_retarget.joint_trajectory import JointTrajectory, plain
 
 __all__ = ["RetargetNode", "RetargetNodeConfig", "joint_trajectory_from_msg", "joint_trajectory_msg"]
@@ -48,9 +49,10 @@ class RetargetNodeConfig:
     anchor: str = "world"  #: goal mapping anchor (``world`` or ``shoulder``) [-]
     settle_s: float = 0.5  #: quiet time after a task's last input before it is retargeted [s]
     require_schedule: bool = False  #: wait for the task's schedule [-]
-    deepen_grasps: bool = False  #: move object-grasp wrist goals into the object (needs ``scene``) [-]
+    deepen_grasps: bool = False  #: gripper goals around the grasps of a schedule (needs ``scene``) [-]
     palm_offset: float = 0.06  #: planners' wrist distance beyond an object's box at a grasp [m]
     grasp_depth: float = 0.03  #: gripper TCP depth inside the object's box past its near face [m]
+    standoff: float = 0.08  #: straight final approach / first retreat along the approach axis [m]
     sample_rate: float = 60.0  #: sampling of the plans [Hz]
     hip: tuple[float, float, float] = (0.0, 0.0, 0.0)  #: hip x [m], y [m], yaw [rad] without a schedule
     period_s: float = 0.1  #: check period of the settle timer [s]
@@ -70,11 +72,13 @@ class RetargetNodeConfig:
             raise ConfigError("RetargetNodeConfig: settle_s >= 0 s, sample_rate > 0 Hz, period_s > 0 s")
         if self.deepen_grasps and not self.scene:
             raise ConfigError("RetargetNodeConfig.deepen_grasps needs the scene (its object names)")
-        self.grasp()  # validates palm_offset and grasp_depth
+        self.grasp()  # validates palm_offset, grasp_depth and standoff
 
     def grasp(self) -> GraspDepthConfig:
-        """The grasp-depth config of ``palm_offset`` and ``grasp_depth`` [m]."""
-        return GraspDepthConfig(palm_offset=self.palm_offset, grasp_depth=self.grasp_depth)
+        """The gripper-goal config of ``palm_offset``, ``grasp_depth`` and ``standoff`` [m]."""
+        return GraspDepthConfig(
+            palm_offset=self.palm_offset, grasp_depth=self.grasp_depth, standoff=self.standoff
+        )
 
 
 def joint_trajectory_msg(traj: JointTrajectory, stamp_s: float, frame_id: str) -> Any:
@@ -208,10 +212,7 @@ class RetargetNode(Node[RetargetNodeConfig]):
             fields |= {"position": position, "quaternion": quat, "contact_event": str(k.contact_event)}
             frames.append(Keyframe.from_dict({**fields, "object": str(k.object_name)}))
         segments = tuple(PlannedSegment(max(0.0, s - stamp), seg, seg.segment) for s, seg in task.segments)
-        schedule = Schedule(task_id, tuple(frames), segments, tuple(steps))
-        if self.config.deepen_grasps and self.spec is not None:
-            schedule = deepen_grasps(schedule, [o.name for o in self.spec.objects], self.config.grasp())
-        return schedule
+        return Schedule(task_id, tuple(frames), segments, tuple(steps))
 
     def _retarget(self, task_id: str, task: _Task) -> None:
         from hsi_retarget.mapping import MappingConfig
@@ -225,6 +226,7 @@ class RetargetNode(Node[RetargetNodeConfig]):
                 mapping=MappingConfig(anchor=cfg.anchor),  # type: ignore[arg-type]
                 sample_rate=cfg.sample_rate,
                 hip=cfg.hip,
+                grasp=cfg.grasp() if cfg.deepen_grasps and self.spec is not None else None,
             )
             traj = retarget(self._source(task_id, task), self.robot, self.spec, config)
         except HsiError as exc:

@@ -8,7 +8,7 @@ object's bottom centre). A trajectory is executed when the ``retarget`` report t
 
 Each task runs in the scene at rest (``reset_each_task``) with the robot snapped to the trajectory's
 first configuration; the robot stands still ``dwell_after_s`` at every gripper event (and
-``dwell_before_release_s`` before a release) while the fingers move (:mod:`hsi_nodes.demo.dwell`).
+``dwell_before_release_s`` before a release) while the fingers move (:mod:`hsi_retarget.gripper_dwell`).
 During the execution ``/robot/joint_states`` (``sensor_msgs/JointState``, stamped with the node clock plus
 the simulated execution time) goes out at ``joint_state_rate``; afterwards a ``TaskReport`` (stage
 ``sim``) with success, placement error, collisions, tracking error and the full report as
@@ -193,7 +193,7 @@ class SimCheckNode(Node[SimCheckNodeConfig]):
         return publish
 
     def _execute(self, task_id: str, traj: Any, events: list[dict[str, Any]]) -> None:
-        from hsi_nodes.demo.dwell import DwellConfig, add_gripper_dwell
+        from hsi_retarget.gripper_dwell import DwellConfig, add_gripper_dwell
         from hsi_retarget.joint_trajectory import ContactEvent, JointTrajectory
         from hsi_retarget.sim_check import TaskGoal, execute
 

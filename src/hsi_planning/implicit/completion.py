@@ -6,6 +6,11 @@ to the **support surface** under it: the highest upward-facing horizontal surfac
 (labels whose class is not an object kind) below the visible part, near its footprint. Normals come
 from a local principal-component fit of the furniture points.
 
+A board in front of the cameras can also hide an object's **top** (a bottle in a cabinet seen from head
+height). When the object's class is known and its visible height is below what that class can be
+(:func:`class_height`) and its top face was not seen (:func:`top_seen`), the box is extended up to
+the class's largest height, but not into the obstacle observed above it.
+
 Used for the held object's box (what must stay clear while carrying), not for the contact, which is
 placed from the visible points (:func:`~hsi_planning.implicit.prior.contact_point`).
 """
@@ -16,6 +21,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
+from hsi_planning.scene.objects import DEFAULTS
 from hsi_planning.scene.spec import OBJECT_KINDS
 
 F64 = NDArray[np.float64]
@@ -28,6 +34,13 @@ SUPPORT_DROP = 0.30
 SUPPORT_GAP = 0.01
 #: [m] furniture this close under the visible bottom (and its footprint) means the bottom was seen.
 SEEN_BOTTOM = 0.02
+#: [-] scale range of generated objects around their class's default size (layout generator: 0.8–1.25).
+CLASS_SCALE = (0.8, 1.25)
+#: [m] gap kept between an extended top and the obstacle observed above it.
+CEILING_GAP = 0.03
+#: [m] points this close below an object's highest point belong to its top face; [-] share of them on a
+#: horizontal surface when the top face was seen.
+TOP_BAND, TOP_SHARE = 0.01, 0.5
 #: [-] |n_z| of a horizontal surface's normal.
 _HORIZONTAL = 0.9
 #: [-] neighbours of the normal fit; [-] horizontal points needed in the support layer.
@@ -95,13 +108,49 @@ def support_height(target_points: ArrayLike, furniture_points: ArrayLike) -> flo
     return None if first is None else float(z[first])
 
 
-def completed_bounds(target_points: ArrayLike, furniture_points: ArrayLike) -> tuple[F64, F64]:
-    """(lo (3,), hi (3,)) [m] box of the target: its visible points' box extended down to the support
-    surface (:func:`support_height`) when one is found below it."""
+def top_seen(target_points: ArrayLike) -> bool:
+    """Whether the cameras saw the object's top face: most of its points within ``TOP_BAND`` of the
+    highest one lie on a horizontal surface (local normal within ~25° of vertical); a view cut off by an
+    occluder ends on the object's side instead."""
     tp = np.asarray(target_points, dtype=np.float64).reshape(-1, 3)
-    lo, hi = tp.min(axis=0), tp.max(axis=0)
+    if tp.shape[0] < _NEIGHBOURS:
+        return False
+    band = tp[tp[:, 2] >= tp[:, 2].max() - TOP_BAND]
+    return bool(np.mean(_normals_z(band, tp) >= _HORIZONTAL) >= TOP_SHARE)
+
+
+def class_height(kind: str) -> tuple[float, float]:
+    """(smallest, largest) [m] height of an object of class ``kind`` (its default size × ``CLASS_SCALE``)."""
+    h = DEFAULTS[kind].size[-1]
+    return CLASS_SCALE[0] * h, CLASS_SCALE[1] * h
+
+
+def completed_bounds(
+    target_points: ArrayLike,
+    furniture_points: ArrayLike,
+    kind: str | None = None,
+    obstacle_points: ArrayLike | None = None,
+) -> tuple[F64, F64]:
+    """(lo (3,), hi (3,)) [m] box of the target: its visible points' box extended down to the support
+    surface (:func:`support_height`) when one is found below it, and, for an object of class ``kind``
+    that looks shorter than the class can be, up to the class's largest height, below the lowest of the
+    ``obstacle_points`` (M, 3) [m] above its footprint (less ``CEILING_GAP``)."""
+    tp = np.asarray(target_points, dtype=np.float64).reshape(-1, 3)
+    lo, hi = tp.min(axis=0), tp.max(axis=0).copy()
     z = support_height(tp, furniture_points)
     if z is not None:
         lo = lo.copy()
         lo[2] = min(lo[2], z)
+    if kind in DEFAULTS:
+        smallest, largest = class_height(kind)
+        if hi[2] - lo[2] < smallest and not top_seen(tp):
+            top = lo[2] + largest
+            if obstacle_points is not None:
+                op = np.asarray(obstacle_points, dtype=np.float64).reshape(-1, 3)
+                above = (
+                    (op[:, :2] >= lo[:2]).all(axis=1) & (op[:, :2] <= hi[:2]).all(axis=1) & (op[:, 2] > hi[2])
+                )
+                if above.any():
+                    top = min(top, float(op[above, 2].min()) - CEILING_GAP)
+            hi[2] = max(hi[2], top)
     return lo, hi

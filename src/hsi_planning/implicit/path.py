@@ -33,13 +33,14 @@ class Clearance:
         self.n_points = int(pts.shape[0])
         self._tree = cKDTree(pts, balanced_tree=False, compact_nodes=False) if self.n_points else None
 
-    def __call__(self, points: ArrayLike) -> F64:
-        """(N,) [m] distance of each of ``points`` (N, 3) to the nearest obstacle point."""
+    def __call__(self, points: ArrayLike, bound: float = np.inf) -> F64:
+        """(N,) [m] distance of each of ``points`` (N, 3) to the nearest obstacle point; distances beyond
+        ``bound`` [m] come back as ``bound`` (a bounded search is several times faster)."""
         p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         if self._tree is None:
-            return np.full(p.shape[0], np.inf)
-        d, _ = self._tree.query(p, k=1)
-        return np.asarray(d, dtype=np.float64)
+            return np.full(p.shape[0], bound)
+        d, _ = self._tree.query(p, k=1, distance_upper_bound=bound)
+        return np.asarray(np.minimum(d, bound), dtype=np.float64)
 
     def segments_clear(
         self, a: ArrayLike, ends: ArrayLike, radius: float, step: float = 0.01

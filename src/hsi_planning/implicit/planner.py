@@ -53,6 +53,7 @@ from hsi_planning.implicit.problem import (
 from hsi_planning.implicit.runtime_field import (
     SegmentContext,
     box_samples,
+    clear_lift,
     fit_segment_latent,
     free_lift,
     remaining_time,
@@ -237,14 +238,15 @@ class ImplicitPlanner:
                 f"(closer than {cfg.start_clearance} m to an obstacle point); move the wrist to free space"
             )
         contact = contact_point(target_pts, axis, cfg.palm_offset)
-        if not grid.contains(contact)[0] or fields.obstacle_mask[tuple(grid.index(contact)[0])]:
+        if not grid.contains(contact)[0] or float(clearance(contact)[0]) < cfg.start_clearance:
             raise PlanningError(
                 f"the contact pose {contact.round(3).tolist()} [m] in front of {request.target!r} is inside "
                 "an obstacle; no free side to grasp it from along the approach axis"
             )
         # The held object reaches down to its support where neighbours hide its bottom (packed drawers).
         furniture = furniture_mask(labels, request.cloud.label_classes, ids)
-        held = completed_bounds(target_pts, points[furniture])
+        kind = (request.cloud.label_classes or {}).get(ids[0])
+        held = completed_bounds(target_pts, points[furniture], kind, points[~is_target])
         ctx = SegmentContext(
             fields=fields,
             clearance=clearance,
@@ -253,8 +255,11 @@ class ImplicitPlanner:
             carried=box_samples(np.vstack(held), cfg.carried_padding) - contact,
             lift=0.0,
             config=cfg,
+            approach_axis=np.asarray(axis, dtype=np.float64),
         )
-        ctx = dataclasses.replace(ctx, lift=free_lift(ctx, cfg.lift_height, cfg.check_margin))
+        rise = clear_lift(points[~is_target], contact, ctx.carried, cfg.lift_pad, cfg.check_margin)
+        lift = min(max(cfg.lift_height, rise), cfg.max_lift)
+        ctx = dataclasses.replace(ctx, lift=free_lift(ctx, lift, cfg.check_margin))
         plans: dict[str, SegmentPlan] = {}
         info: dict[str, Any] = {
             "approach_axis": np.asarray(axis).tolist(),

@@ -30,6 +30,7 @@ class ImplicitPlannerConfig:
     clearance_relax: float = 0.10  #: [m] arc length before the contact over which clearance relaxes
     check_margin: float = 0.0075  #: [m] extra clearance the final path keeps from the observed points
     carried_padding: float = 0.01  #: [m] growth of the held object's bounding box (points lie inside it)
+    carried_margin: float = 0.004  #: [m] clearance the padded box keeps on the final path (half at the lift)
     start_clearance: float = 0.01  #: [m] a start this close to an obstacle point counts as inside it
     descent_step: float = 0.0125  #: [m] step of the gradient descent on φ̂
     max_descent_steps: int = 400  #: [steps] descent gives up after this many steps
@@ -43,7 +44,11 @@ class ImplicitPlannerConfig:
     blend_fraction: float = (
         0.2  #: [-] share of the path before the contact blended into the prior's orientation
     )
-    lift_height: float = 0.04  #: [m] vertical lift (set-down) at a contact where an object is carried
+    lift_height: float = 0.04  #: [m] least vertical lift (set-down) at a contact where an object is carried
+    max_lift: float = 0.3  #: [m] the lift rises above neighbours and container walls up to this height
+    #: [m] obstacles this far around the held object's footprint are risen above (walls hide what is
+    #: behind them)
+    lift_pad: float = 0.05
     phi_cap_factor: float = 1.2  #: [-] Eq. 11 candidates need φ̂ ≤ this × the prior's duration
     repair: str = "fallback"  #: [-] fast-marching repair of φ̂: fallback (when needed), always, never
     crop_margin: float = 0.3  #: [m] obstacle points farther than this outside the planning region are ignored
@@ -83,11 +88,14 @@ class ImplicitPlannerConfig:
             "repair_retries",
             "repair_margin_step",
             "carried_padding",
+            "carried_margin",
             "check_margin",
             "start_clearance",
             "path_smoothing",
             "speed_smoothing",
             "lift_height",
+            "max_lift",
+            "lift_pad",
             "crop_margin",
         )
         for name in non_negative:

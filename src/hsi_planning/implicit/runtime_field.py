@@ -32,6 +32,14 @@ from hsi_planning.trajectory import WristTrajectory
 F64 = NDArray[np.float64]
 #: [m] height above the held box's bottom from which its points count as "upper" (lift checks).
 _UPPER = 0.02
+#: [m] the held box's clearance is searched up to this far (every check needs far less).
+_CARRIED_BOUND = 0.05
+#: [-] z component of an approach axis that reaches down into a container (drawer, box, counter).
+TOP_DOWN = 0.7
+#: [m] around such a contact the wrist stays above the contact's height (the unseen rim and bottom).
+_UNDER_RADIUS = 0.3
+#: [m] how much a lifted box's sampled clearance may fall below its start (face samples vs cloud points).
+_LIFT_NOISE = 0.004
 #: Share of ``clearance_relax`` used for the free-node mask (distance to the contact < path length).
 _MASK_RELAX = 0.7
 
@@ -49,6 +57,7 @@ class SegmentContext:
             they move with the wrist while carrying.
         lift: [m] vertical lift (set-down) at the contact when carrying.
         config: planner settings.
+        approach_axis: (3,) direction out of the container opening (None: unknown).
     """
 
     fields: FieldSet
@@ -58,16 +67,19 @@ class SegmentContext:
     carried: F64
     lift: float
     config: ImplicitPlannerConfig
+    approach_axis: F64 | None = None
 
     def carried_clearance(self, wrist: F64, upper: bool = False) -> F64:
-        """(N,) [m] observed clearance of the held object's box with the wrist at ``wrist`` (N, 3); with
-        ``upper`` only of its points more than 2 cm above the box bottom (what a vertical lift can hit)."""
+        """(N,) [m] observed clearance of the held object's box with the wrist at ``wrist`` (N, 3), at most
+        ``_CARRIED_BOUND``; with ``upper`` only of its points more than 2 cm above the box bottom (what a
+        vertical lift can hit)."""
         w = np.asarray(wrist, dtype=np.float64).reshape(-1, 3)
         pts = self.carried
         if upper:
             pts = pts[pts[:, 2] >= pts[:, 2].min() + _UPPER]
         moved = (w[:, None, :] + pts[None, :, :]).reshape(-1, 3)
-        return np.asarray(self.clearance(moved).reshape(w.shape[0], -1).min(axis=1), dtype=np.float64)
+        d = self.clearance(moved, bound=_CARRIED_BOUND)
+        return np.asarray(d.reshape(w.shape[0], -1).min(axis=1), dtype=np.float64)
 
     @property
     def carried_clear(self) -> float:
@@ -168,8 +180,8 @@ def _carried_blocked(ctx: SegmentContext, pad: int) -> NDArray[np.bool_]:
 def wrist_free(ctx: SegmentContext, *, carrying: bool) -> Callable[[float], NDArray[np.bool_]]:
     """Nodes where the wrist may be, as a function of a safety margin [m] → (n, n, n) bool: open, the hand
     sphere (radius + margin) clear of the observed obstacles (relaxed towards the contact over
-    ``clearance_relax``) and, when carrying, the held object's box clear of the obstacle nodes (except
-    in the lift above the contact)."""
+    ``clearance_relax``), not under the contact when reaching down into a container and, when carrying,
+    the held object's box clear of the obstacle nodes (except in the lift above the contact)."""
     cfg, fs = ctx.config, ctx.fields
     grid = fs.grid
     nodes = grid.points()
@@ -183,6 +195,10 @@ def wrist_free(ctx: SegmentContext, *, carrying: bool) -> Callable[[float], NDAr
     ).reshape(grid.shape)  # the vertical lift above the contact, where the object leaves its support
 
     relax = _MASK_RELAX * cfg.clearance_relax  # paths are longer than the straight distance r
+    axis = ctx.approach_axis
+    if axis is not None and float(axis[2]) > TOP_DOWN:  # reaching down into a container: not from under
+        under = (np.linalg.norm(rel[:, :2], axis=1) <= _UNDER_RADIUS) & (rel[:, 2] < -2.0 * grid.resolution)
+        open_nodes = open_nodes & ~under.reshape(grid.shape)
 
     def free(margin: float) -> NDArray[np.bool_]:
         need = required_clearance(r, cfg.hand_radius + margin, ctx.contact_clear, relax)
@@ -232,10 +248,31 @@ def box_samples(points: F64, padding: float, step: float = 0.02) -> F64:
     return np.asarray(grid[on_face], dtype=np.float64)
 
 
+def clear_lift(obstacle_points: F64, contact: F64, carried: F64, pad: float, margin: float) -> float:
+    """[m] vertical lift that brings the bottom of the held object's box (``carried`` (M, 3) [m] relative
+    to the wrist at ``contact`` (3,) [m]) ``margin`` [m] above every one of ``obstacle_points`` (K, 3) [m]
+    over its footprint grown by ``pad`` [m] (neighbours and container walls it must rise above before it
+    can move sideways); 0 when nothing stands there."""
+    lo, hi = contact + carried.min(axis=0), contact + carried.max(axis=0)
+    pts = np.asarray(obstacle_points, dtype=np.float64).reshape(-1, 3)
+    near = (
+        (pts[:, :2] >= lo[:2] - pad).all(axis=1)
+        & (pts[:, :2] <= hi[:2] + pad).all(axis=1)
+        & (pts[:, 2] > lo[2] + 0.005)
+    )
+    return float(max(0.0, pts[near, 2].max() - lo[2] + margin)) if near.any() else 0.0
+
+
 def free_lift(ctx: SegmentContext, lift: float, margin: float, step: float = 0.005) -> float:
     """[m] the largest vertical lift ≤ ``lift`` of the held object from the contact that keeps its upper
-    part ``margin`` [m] clear of the observed obstacles (a shelf board or lid right above it)."""
+    part ``margin`` [m] clear of the observed obstacles (a shelf board or lid right above it; or as clear
+    as it starts, next to a packed neighbour) and the hand
+    sphere as clear as a path there must keep (relaxed towards the contact)."""
+    cfg = ctx.config
     heights = np.arange(step, lift + 1e-9, step)
-    clear = ctx.carried_clearance(ctx.contact + heights[:, None] * np.array([0.0, 0.0, 1.0]), upper=True)
-    blocked = np.flatnonzero(clear < margin)
+    wrist = ctx.contact + heights[:, None] * np.array([0.0, 0.0, 1.0])
+    clear = ctx.carried_clearance(wrist, upper=True)
+    start = float(ctx.carried_clearance(ctx.contact[None], upper=True)[0])  # neighbours beside it stay
+    need = required_clearance(heights, cfg.hand_radius + margin, ctx.contact_clear, cfg.clearance_relax)
+    blocked = np.flatnonzero((clear < min(margin, start - _LIFT_NOISE)) | (ctx.clearance(wrist) < need))
     return float(lift if blocked.shape[0] == 0 else heights[blocked[0]] - step)

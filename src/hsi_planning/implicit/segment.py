@@ -29,12 +29,14 @@ from hsi_planning.implicit.path import (
     time_path,
 )
 from hsi_planning.implicit.prior import transfer_orientation
-from hsi_planning.implicit.runtime_field import SegmentContext, repair_field, wrist_free
+from hsi_planning.implicit.runtime_field import TOP_DOWN, SegmentContext, repair_field, wrist_free
 from hsi_planning.trajectory import WristTrajectory
 
 __all__ = ["SegmentContext", "SegmentPlan", "plan_segment"]
 
 F64 = NDArray[np.float64]
+#: [-] growth of the time corridor of Eq. 11's candidates when none in it connects (repaired fields).
+_WIDE_CAP = 3.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -64,7 +66,7 @@ def _violation(positions: F64, ctx: SegmentContext, carrying: bool) -> tuple[flo
     what = "the hand"
     if carrying:  # the held object: free of the support once lifted, then keeping check_margin
         after = np.clip((from_contact - ctx.lift) / cfg.clearance_relax, 0.0, 1.0)
-        obj = ctx.carried_clearance(positions) - cfg.check_margin * (0.5 + 0.5 * after)
+        obj = ctx.carried_clearance(positions) - cfg.carried_margin * (0.5 + 0.5 * after)
         lifting = from_contact <= ctx.lift + 0.005  # leaving the support: only the upper part can hit
         obj[lifting] = ctx.carried_clearance(positions[lifting], upper=True)
         if obj.min() < margins.min():
@@ -74,22 +76,70 @@ def _violation(positions: F64, ctx: SegmentContext, carrying: bool) -> tuple[flo
     return float(margins[i]), where
 
 
+def _keep_above_lift(path: F64, ctx: SegmentContext) -> F64:
+    """The path (approach order, last two samples: lift top and contact) with every earlier sample over
+    the container around the contact (horizontally within the held object's footprint + ``lift_pad``)
+    raised to at least the lift top: the carried object stays above the walls and neighbours it was
+    lifted over (what stands behind a wall is hidden from the cameras). For an empty hand reaching
+    down into a container (approach axis within ~45° of vertical) the path stays above the contact
+    there: it enters from above, not under the unseen rim or bottom."""
+    top_down = ctx.approach_axis is not None and float(ctx.approach_axis[2]) > TOP_DOWN
+    if (ctx.lift <= 0.0 and not top_down) or path.shape[0] < 3:
+        return path
+    top = ctx.contact[2] + ctx.lift
+    reach = ctx.config.lift_pad + 0.5 * float(np.linalg.norm(np.ptp(ctx.carried[:, :2], axis=0)))
+    out = path.copy()
+    head = out[:-2]
+    over = np.linalg.norm(head[:, :2] - ctx.contact[:2], axis=1) <= reach
+    head[over, 2] = np.maximum(head[over, 2], top)
+    return out
+
+
+def _waypoint(anchor: F64, x: F64) -> F64:
+    """(N, 3) [m] the corner of an up-and-over connection anchor → waypoint → x (N, 3): straight up (or
+    not at all) from ``anchor`` to the height of each x."""
+    w = np.repeat(anchor[None], x.shape[0], axis=0)
+    w[:, 2] = np.maximum(anchor[2], x[:, 2])
+    return w
+
+
 def _connect_clear(
-    ctx: SegmentContext, anchor: F64, carrying: bool, margin: float
+    ctx: SegmentContext, anchor: F64, carrying: bool, margin: float, up: bool = False
 ) -> Callable[[F64], NDArray[np.bool_]]:
+    """(B, 3) start candidates → (B,) whether the connection from ``anchor`` is clear: a straight segment,
+    or with ``up`` the up-and-over polyline of :func:`_waypoint`; the hand sphere (radius + ``margin``)
+    and, ``carrying``, the corners of the held object's box (``margin``)."""
     radius = ctx.config.hand_radius + margin
+    offsets = [(np.zeros(3), radius)]
+    if carrying:
+        corners = np.array([[a, b, c] for a in (0, 1) for b in (0, 1) for c in (0, 1)])
+        box = np.where(corners, ctx.carried.max(axis=0), ctx.carried.min(axis=0))
+        offsets += [(corner, margin) for corner in box]
+
+    def straight(a: F64, x: F64) -> NDArray[np.bool_]:
+        ok = np.ones(x.shape[0], dtype=bool)
+        for off, r in offsets:
+            if ok.any():
+                ok[ok] = ctx.clearance.segments_clear(a + off, x[ok] + off, r)
+        return ok
 
     def clear(x: F64) -> NDArray[np.bool_]:
-        ok = ctx.clearance.segments_clear(anchor, x, radius)
-        if carrying:
-            corners = np.array([[a, b, c] for a in (0, 1) for b in (0, 1) for c in (0, 1)])
-            box = np.where(corners, ctx.carried.max(axis=0), ctx.carried.min(axis=0))
-            for corner in box:
-                if ok.any():
-                    ok[ok] = ctx.clearance.segments_clear(anchor + corner, x[ok] + corner, margin)
+        if not up:
+            return straight(anchor, x)
+        ok = np.zeros(x.shape[0], dtype=bool)
+        corner = _waypoint(anchor, x)
+        for z in np.unique(corner[:, 2]):
+            level = np.flatnonzero(corner[:, 2] == z)
+            w = corner[level[0]]
+            if straight(anchor, w[None])[0]:
+                ok[level] = straight(w, x[level])
         return ok
 
     return clear
+
+
+def _always(x: F64) -> NDArray[np.bool_]:
+    return np.ones(x.shape[0], dtype=bool)
 
 
 def _field_speed(grid: Any, phi: F64, far: float, points: F64) -> F64:
@@ -109,21 +159,33 @@ def _descend(
     margin: float,
     connect: bool,
     finish: Callable[[], F64] | None = None,
+    capped: bool = True,
 ) -> tuple[F64, F64, float]:
     """(path in approach order, speeds [m/s], length [m] descended on ``phi``) from Eq. 11's start point
     down ∇φ to the contact. Where the descent stalls (a local minimum), it continues on ``finish()``
-    (the repaired field) when given. With ``connect`` the path starts at ``anchor`` (straight, clear
-    connection), else at the start point."""
+    (the repaired field) when given. With ``connect`` the path starts at ``anchor`` (a straight, clear
+    connection, else straight up first and then straight over: a drawer front or board in the way),
+    else at the start point. Eq. 11's candidates lie in the prior's time corridor; unless
+    ``capped``, a corridor ``_WIDE_CAP`` times as long is tried when none of them connects (a repaired
+    field's times grow slowly off the corridor)."""
     cfg, fs = ctx.config, ctx.fields
     grid, far = fs.grid, fs.config.unreachable_time
     flat = phi.reshape(-1)
     cap = cfg.phi_cap_factor * max(prior.duration, 0.2)
-    cand = np.flatnonzero((flat < min(cap, far)) & free.reshape(-1))
     points = grid.points()
     mean_speed = prior.path_length() / max(prior.duration, 1e-6)
     lift = ctx.lift
-    clear = _connect_clear(ctx, anchor, lift > 0.0, margin) if connect else lambda x: np.ones(len(x), bool)
-    start = points[cand[select_start(points[cand], flat[cand], anchor, mean_speed, clear)]]
+    caps = (cap,) if capped else (cap, _WIDE_CAP * cap)
+    tries = [(c, up) for up in ((False, True) if connect else (False,)) for c in caps]
+    for k, (c, up) in enumerate(tries):
+        clear = _connect_clear(ctx, anchor, lift > 0.0, margin, up) if connect else _always
+        cand = np.flatnonzero((flat < min(c, far)) & free.reshape(-1))
+        try:
+            start = points[cand[select_start(points[cand], flat[cand], anchor, mean_speed, clear)]]
+            break
+        except PlanningError:
+            if k == len(tries) - 1:
+                raise
     descent = DescentConfig(
         step=cfg.descent_step, stop_radius=max(lift, cfg.descent_step), max_steps=cfg.max_descent_steps
     )
@@ -143,6 +205,8 @@ def _descend(
         )
     tail = [ctx.contact + np.array([0.0, 0.0, lift])] if lift > 0.0 else []
     head = [anchor[None]] if connect else []
+    if connect and up and start[2] > anchor[2]:
+        head.append(_waypoint(anchor, start[None]))
     path = np.vstack([*head, *(p for _, p in parts), *tail, ctx.contact[None]])
     speeds = [np.full(len(head), mean_speed)]
     speeds += [_field_speed(grid, f, far, p) for f, p in parts]
@@ -188,7 +252,15 @@ def plan_segment(
             field_used = phi if kind == "learned" else repaired()
             finish = repaired if kind == "learned" and cfg.repair != "never" else None
             raw, speed, learned_length = _descend(
-                field_used, lifted, anchor, prior, free=free, margin=margin, connect=connect, finish=finish
+                field_used,
+                lifted,
+                anchor,
+                prior,
+                free=free,
+                margin=margin,
+                connect=connect,
+                finish=finish,
+                capped=kind == "learned",
             )
         except PlanningError as exc:
             error = exc
@@ -196,6 +268,7 @@ def plan_segment(
             continue
         if kind == "repaired":
             learned_length = 0.0
+        raw = _keep_above_lift(raw, lifted)
         path = smooth_path(raw, cfg.path_smoothing, cfg.path_step)
         arc_raw, arc_new = arc_length(raw), arc_length(path)
         v = np.interp(arc_new / arc_new[-1], arc_raw / arc_raw[-1], speed)

@@ -5,7 +5,8 @@ Works in the frame of the target's support with the axis-aligned boxes of the ob
 - the target must fit: its top plus ``headroom`` stays under the support's ceiling;
 - front access (cabinet, shelf): the corridor from the opening to the target (target width plus
   ``hand_margin`` per side) is free, or every object in it has a free corridor itself (the scheduler
-  can move it aside first), i.e. the target is not fully enclosed from the opening;
+  can move it aside first), i.e. the target is not fully enclosed from the opening; with ``direct``
+  the corridor itself must be free (one reach, no blocker to move first);
 - top access (drawer, counter, table): on two opposite sides (±x or ±y) the gap to the next object or
   wall is at least ``finger_clearance``.
 """
@@ -83,8 +84,11 @@ def _side_gaps(
     return gaps
 
 
-def target_reachable(spec: SceneSpec, target: str, config: ReachConfig | None = None) -> bool:
-    """Whether ``target`` can be reached (see the module docstring)."""
+def target_reachable(
+    spec: SceneSpec, target: str, config: ReachConfig | None = None, *, direct: bool = False
+) -> bool:
+    """Whether ``target`` can be reached (see the module docstring); ``direct``: without moving another
+    object out of the way first."""
     config = config or ReachConfig()
     o = spec.object_by_name(target)
     support = support_surface(spec, o.on)
@@ -95,6 +99,8 @@ def target_reachable(spec: SceneSpec, target: str, config: ReachConfig | None = 
     hx, hy = support.half_extents
     if kind in ("cabinet", "shelf"):
         blockers = _corridor_blockers(target, boxes, hx, config.hand_margin)
+        if direct:
+            return not blockers
         return all(not _corridor_blockers(b, boxes, hx, config.hand_margin) for b in blockers)
     walls = (hx, hy) if kind == "drawer_unit" else (math.inf, math.inf)
     gaps = _side_gaps(target, boxes, walls)

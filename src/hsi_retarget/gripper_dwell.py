@@ -6,8 +6,6 @@ A schedule's ``grasp`` / ``release`` keyframe marks the *end* of the human hand'
 handle or lifts an object before the fingers hold it. :func:`add_gripper_dwell` inserts a standstill of
 ``after_s`` at every grasp and release event (and ``before_release_s`` before a release, so a carried
 object comes to rest before it is let go), shifting the rest of the trajectory and its events.
-
-Belongs with the retargeter's timing (:mod:`hsi_retarget.timing`); it lives here until that has it.
 """
 
 from __future__ import annotations

@@ -1,0 +1,250 @@
+"""One episode of ``benchmarks/pick_place.py``: a case run through the demo's pipeline
+(:func:`hsi_nodes.demo.pipeline.run_task`) for one robot, planner and perturbation setting, as a JSON row.
+
+Perturbations. ``run_task`` has no perturbation argument yet, so a perturbed episode runs it with the
+package-level :func:`hsi_retarget.sim_check.execute` (which ``run_task`` imports at call time) temporarily
+replaced by a wrapper that adds seeded events (:func:`hsi_retarget.sim_check.random_perturbations`: pushes
+on arm links, the target moved up to 5 cm before its grasp) and a re-plan hook. On a target move the hook
+re-plans like the pipeline does (the layout with the object at its new place is re-observed, the task
+re-resolved and re-scheduled, then turned into a robot trajectory by the pipeline's ``robot_trajectory``),
+finds the moment of the new trajectory closest to the robot's current configuration and continues from
+there after a short joint-space blend. Pushes are not re-planned (the controller recovers). The wrapper
+goes away when ``run_task`` takes a perturbation config.
+
+IK time: ``trajectory.meta`` of the retargeting (``ik_time_s`` over ``frames``: per-frame differential IK,
+joint smoothing and residuals of the initial plan; re-plans are reported separately).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import logging
+import math
+import time
+from collections.abc import Iterator
+from typing import Any
+
+import numpy as np
+from _pick_place_cases import Case
+
+from hsi_nodes.demo.pipeline import (
+    PipelineConfig,
+    TaskOutcome,
+    make_demo_planner,
+    resolve_task,
+    robot_trajectory,
+    run_task,
+)
+from hsi_nodes.demo.tasks import DemoTask
+from hsi_planning.errors import HsiError
+from hsi_planning.perception import CloudConfig, LabelledCloud
+from hsi_planning.planning import Planner
+from hsi_planning.scene import SceneSpec
+from hsi_planning.scene.model import support_surface
+from hsi_planning.scheduler import Schedule
+
+_LOG = logging.getLogger("pick_place")
+BLEND_MIN_S = 0.3  #: [s] shortest joint-space blend from the current configuration into a re-plan
+BLEND_SPEED = 0.5  #: [-] fraction of the joint velocity limits used by that blend
+MATCH_WINDOW_S = 3.0  #: [s] a re-plan is joined within this time of the current trajectory time
+CLOUD_VOXEL = 0.01  #: [m] voxel of the rendered clouds (as the demo's runner)
+
+_planners: dict[tuple[str, str], Planner] = {}
+_clouds: dict[str, LabelledCloud] = {}
+
+
+def planner_for(name: str, checkpoint: str) -> Planner:
+    """The planner ``name`` (built once per process)."""
+    key = (name, checkpoint)
+    if key not in _planners:
+        _planners[key] = make_demo_planner(name, checkpoint)
+    return _planners[key]
+
+
+def observe(spec: SceneSpec) -> LabelledCloud:
+    """The labelled cloud of ``spec`` rendered from its cameras (the last few cached per process)."""
+    from hsi_planning.scheduler import SceneWorld
+
+    key = f"{spec.name}:{spec.meta.get('layout')}:{[(o.name, o.xy) for o in spec.objects]}"
+    if key not in _clouds:
+        if len(_clouds) >= 4:
+            _clouds.pop(next(iter(_clouds)))
+        _clouds[key] = SceneWorld(spec, cloud_config=CloudConfig(voxel_size=CLOUD_VOXEL)).cloud()
+    return _clouds[key]
+
+
+def demo_task(case: Case) -> DemoTask:
+    """The case as a demo task (object by name, place click on the drawn spot)."""
+    t = case.template
+    return DemoTask(
+        t.name, case.spec.name, place_click=case.place_click, object_name=t.obj, description=t.description
+    )
+
+
+def moved_spec(spec: SceneSpec, name: str, offset: np.ndarray) -> SceneSpec:
+    """``spec`` with object ``name`` shifted by the horizontal world ``offset`` (3,) [m] on its support."""
+    obj = spec.object_by_name(name)
+    rot = support_surface(spec, obj.on).frame[:3, :3]
+    local = rot.T @ np.asarray(offset, dtype=np.float64)
+    new = dataclasses.replace(obj, xy=(obj.xy[0] + float(local[0]), obj.xy[1] + float(local[1])))
+    objects = tuple(new if o.name == name else o for o in spec.objects)
+    return dataclasses.replace(spec, objects=objects)
+
+
+def _plan_trajectory(task: DemoTask, spec: SceneSpec, planner: Planner, cfg: PipelineConfig) -> Any:
+    """The pipeline's stages up to the joint trajectory: resolve, schedule, then
+    :func:`~hsi_nodes.demo.pipeline.robot_trajectory` (retarget with grasp depth, gripper dwell)."""
+    from hsi_planning.scheduler import SceneWorld, Scheduler
+
+    sched_cfg = cfg.scheduler_config()
+    world = SceneWorld(spec, observe(spec), CloudConfig(voxel_size=cfg.voxel_size))
+    request = resolve_task(task, world, sched_cfg)
+    schedule: Schedule = Scheduler(world, planner, sched_cfg).schedule(request)
+    return robot_trajectory(schedule, spec, cfg)
+
+
+def join(new: Any, q_now: np.ndarray, t_now: float, world: Any) -> Any:
+    """The part of trajectory ``new`` from its configuration closest to ``q_now`` (searched within
+    :data:`MATCH_WINDOW_S` of ``t_now`` [s]), preceded by a blend from ``q_now``; time 0 = now."""
+    from hsi_retarget.joint_trajectory import JointTrajectory
+
+    near = np.flatnonzero(np.abs(new.t - t_now) <= MATCH_WINDOW_S)
+    near = near if near.size else np.arange(len(new.t))
+    k = int(near[np.argmin(np.abs(new.q[near] - q_now[None, :]).max(axis=1))])
+    robot = world.robot
+    blend = BLEND_MIN_S
+    for name in robot.joint_names:
+        iq, iv = robot.q_index(name), robot.v_index(name)
+        if math.isfinite(robot.v_max[iv]) and robot.v_max[iv] > 0:
+            blend = max(blend, abs(new.q[k, iq] - q_now[iq]) / (BLEND_SPEED * robot.v_max[iv]))
+    t0 = float(new.t[k])
+    times = np.concatenate([[0.0], new.t[k:] - t0 + blend])
+    qs = np.vstack([q_now[None, :], new.q[k:]])
+    events = tuple(
+        dataclasses.replace(e, time=e.time - t0 + blend) for e in new.events if e.time >= t0 - 1e-9
+    )
+    meta = {**new.meta, "replan_join_time_s": t0, "replan_blend_s": blend}
+    return JointTrajectory(new.robot, times, qs, new.joint_names, events, meta, new.floating_index)
+
+
+@contextlib.contextmanager
+def perturbed_execution(
+    case: Case, planner: Planner, cfg: PipelineConfig, seed: int, record: dict[str, Any]
+) -> Iterator[None]:
+    """Within the block, ``run_task``'s execution gets seeded perturbations and the re-plan hook (module
+    docstring); ``record`` receives the events, the re-plan count and their wall time [s]."""
+    from hsi_retarget import sim_check
+    from hsi_retarget.sim_check import PerturbationConfig, TargetMove, random_perturbations
+    from hsi_retarget.sim_check.perturb import event_dict
+
+    original = sim_check.execute
+    task = demo_task(case)
+    record.update(events=[], replans=0, replan_wall_s=0.0, replan_errors=[], replan_ik_fps=[])
+
+    def hook(world: Any, event: Any, start: float) -> Any:
+        if not isinstance(event, TargetMove):
+            return None
+        t0 = time.perf_counter()
+        try:
+            spec = moved_spec(case.spec, event.object_name, np.asarray(event.offset))
+            new = _plan_trajectory(task, spec, planner, cfg)
+            t_now = world.time - start
+            joined = join(new, world.robot_q(), t_now, world)
+        except HsiError as exc:
+            record["replan_errors"].append(f"{type(exc).__name__}: {exc}")
+            _LOG.info("%s: re-plan failed: %s", case.tag, exc)
+            return None
+        finally:
+            record["replan_wall_s"] += time.perf_counter() - t0
+        record["replans"] += 1
+        record["replan_ik_fps"].append(float(new.meta.get("ik_rate_fps", math.nan)))
+        return joined
+
+    def execute(world: Any, trajectory: Any, config: Any = None, **kwargs: Any) -> Any:
+        goal = kwargs.get("goal")
+        target = goal.object_name if goal is not None else ""
+        events = random_perturbations(world, trajectory, PerturbationConfig(seed=seed), target=target)
+        record["events"] = [event_dict(e) for e in events]
+        start = world.time
+        kwargs.update(perturbations=events, on_perturbation=lambda w, e: hook(w, e, start))
+        return original(world, trajectory, config, **kwargs)
+
+    sim_check.execute = execute  # type: ignore[assignment]
+    try:
+        yield
+    finally:
+        sim_check.execute = original
+
+
+def _ik(outcome: TaskOutcome) -> tuple[float, float, int]:
+    """(IK time per frame [ms], frames/s, frames) of the outcome's retargeting (NaN, NaN, 0 without)."""
+    meta = outcome.trajectory.meta if outcome.trajectory is not None else {}
+    frames, secs = int(meta.get("frames", 0)), float(meta.get("ik_time_s", math.nan))
+    if frames <= 0 or not math.isfinite(secs) or secs <= 0.0:
+        return math.nan, math.nan, frames
+    return 1000.0 * secs / frames, frames / secs, frames
+
+
+def run_episode(
+    case: Case, robot: str, planner_name: str, *, perturbed: bool, seed: int, checkpoint: str
+) -> dict[str, Any]:
+    """Run ``case`` on ``robot`` with ``planner_name`` (perturbations seeded by ``seed`` if ``perturbed``);
+    the episode's JSON row."""
+    t0 = time.perf_counter()
+    row: dict[str, Any] = {
+        "case": case.index,
+        "tag": case.tag,
+        "template": case.template.name,
+        "family": case.template.family,
+        "reshape": case.reshape,
+        "layout_seed": case.seed,
+        "layout_index": case.layout_index,
+        "object": case.template.obj,
+        "place_on": case.template.place_on,
+        "place_click": list(case.place_click),
+        "robot": robot,
+        "planner": planner_name,
+        "perturbed": perturbed,
+        "perturbation_seed": seed if perturbed else None,
+    }
+    cfg = PipelineConfig(robot=robot, planner=planner_name, checkpoint=checkpoint)
+    try:
+        planner = planner_for(planner_name, checkpoint)
+    except HsiError as exc:
+        row.update(success=False, stage="planner", error=f"{type(exc).__name__}: {exc}", failures=[str(exc)])
+        row["wall_s"] = time.perf_counter() - t0
+        return row
+    cloud = observe(case.spec)
+    record: dict[str, Any] = {}
+    with perturbed_execution(case, planner, cfg, seed, record) if perturbed else contextlib.nullcontext():
+        outcome = run_task(demo_task(case), case.spec, cloud, planner, cfg)
+    rep = outcome.report
+    ms, fps, frames = _ik(outcome)
+    recovered = [p.recovered for p in rep.perturbations if p.event.get("kind") == "push"]
+    row.update(
+        success=bool(rep.success),
+        stage=outcome.stage,
+        error=outcome.error,
+        failures=list(rep.failures),
+        diagnosis=outcome.diagnosis(),
+        placement_error_m=rep.placement_error_m,
+        duration_s=rep.duration_s,
+        collisions=rep.collisions,
+        max_tracking_error_m=rep.max_tracking_error_m,
+        limit_violations=len(rep.limit_violations),
+        ik_ms_per_frame=ms,
+        ik_fps=fps,
+        ik_frames=frames,
+        timings_s={k: round(v, 3) for k, v in outcome.timings.items()},
+        realtime_factor=rep.realtime_factor,
+    )
+    if perturbed:
+        row["perturbation"] = {
+            **record,
+            "pushes_recovered": int(sum(recovered)),
+            "pushes": len(recovered),
+            "replanned_in_execution": rep.replans,
+        }
+    row["wall_s"] = time.perf_counter() - t0
+    return row

@@ -1,0 +1,106 @@
+"""``benchmarks/pick_place.py``: cases on unseen layouts, and a quick run (dual arm, implicit planner, with
+and without perturbations) that writes a complete JSON/Markdown/plot with sane numbers."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hsi_nodes.cli import bench
+from hsi_planning.errors import ConfigError
+
+
+def _cases_module(repo_root: Path):  # type: ignore[no-untyped-def]
+    sys.path.insert(0, str(repo_root / "benchmarks"))
+    try:
+        import _pick_place_cases
+    finally:
+        sys.path.remove(str(repo_root / "benchmarks"))
+    return _pick_place_cases
+
+
+def test_cases_are_unseen_layouts_with_a_free_place_spot(repo_root: Path) -> None:
+    mod = _cases_module(repo_root)
+    from hsi_planning.scene.model import object_pose
+
+    cases = mod.make_cases(10, 100_000)
+    assert [c.index for c in cases] == list(range(10))
+    assert {(c.template.name, c.reshape) for c in cases} == {
+        (t.name, r) for t in mod.TEMPLATES for r in (False, True)
+    }
+    again = mod.make_cases(10, 100_000)
+    assert [c.place_click for c in again] == [c.place_click for c in cases]  # seeded
+    for c in cases:
+        assert c.seed >= 100_000 and c.spec.meta["layout"]["seed"] == c.seed
+        spot = np.asarray(c.place_click)
+        start = object_pose(c.spec, c.template.obj)[:3, 3]
+        assert np.linalg.norm(spot[:2] - start[:2]) >= mod.MIN_MOVE - 1e-9
+        radius = mod.footprint_radius(c.spec, c.template.obj)
+        for o in c.spec.objects:
+            if o.on == c.template.place_on and o.name != c.template.obj:
+                gap = np.linalg.norm(spot[:2] - object_pose(c.spec, o.name)[:2, 3])
+                assert gap >= radius + mod.footprint_radius(c.spec, o.name) + mod.GAP - 1e-9
+
+
+def test_bench_command_for_pick_place(repo_root: Path, tmp_path: Path) -> None:
+    argv = bench.benchmark_command("pick_place", repo_root, True, tmp_path, None, extra=["--workers", "2"])
+    assert argv[1].endswith("benchmarks/pick_place.py")
+    assert argv[2:] == ["--quick", "--out", str(tmp_path), "--workers", "2"]
+    with pytest.raises(ConfigError, match="available"):
+        bench.benchmark_command("pickplace", repo_root, True, None, None)
+
+
+def test_quick_run_writes_the_tables(repo_root: Path, tmp_path: Path) -> None:
+    cmd = [
+        sys.executable,
+        str(repo_root / "benchmarks" / "pick_place.py"),
+        "--quick",
+        "--robots",
+        "dual_ur5e",
+        "--planners",
+        "implicit",
+        "--out",
+        str(tmp_path),
+    ]
+    env = {**os.environ, "MUJOCO_GL": "egl"}
+    done = subprocess.run(
+        cmd, cwd=repo_root, capture_output=True, text=True, timeout=400, env=env, check=False
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert "expected" in done.stderr  # the time estimate
+    results = json.loads((tmp_path / "pick_place.json").read_text())
+    assert (tmp_path / "pick_place.png").stat().st_size > 1000
+    md = (tmp_path / "pick_place.md").read_text()
+    assert "dual_ur5e/implicit/plain" in md and "dual_ur5e/implicit/perturbed" in md and "IK [ms/frame]" in md
+    assert results["episodes"] == len(results["rows"]) == 2 and results["cases"] == 1
+    rows = {r["perturbed"]: r for r in results["rows"]}
+    assert set(rows) == {False, True}
+    for row in rows.values():
+        assert row["stage"] in ("resolve", "schedule", "retarget", "execute", "done")
+        assert isinstance(row["success"], bool) and isinstance(row["failures"], list)
+        assert row["success"] or row["failures"]  # a failure says why
+        assert math.isfinite(row["wall_s"]) and row["wall_s"] > 0.0
+        if row["stage"] == "done":
+            assert row["ik_frames"] > 0 and 0.0 < row["ik_ms_per_frame"] < 1000.0
+            assert math.isclose(row["ik_fps"], 1000.0 / row["ik_ms_per_frame"], rel_tol=1e-6)
+            assert row["duration_s"] > 0.0 and row["collisions"] >= 0
+    pert = rows[True]["perturbation"]
+    assert pert["events"] and all(e["kind"] in ("push", "target_move") for e in pert["events"])
+    assert rows[False].get("perturbation") is None
+    summary = results["summary"]
+    for stats in [*summary["cells"].values(), *summary["robots"].values()]:
+        for key in ("success_rate", "executed_rate", "collision_free_rate"):
+            value = stats[key]
+            assert value is None or 0.0 <= value <= 1.0 or math.isnan(value)
+        assert 0.0 <= stats["success_rate"] <= 1.0
+        assert stats["wall_per_episode_s"] > 0.0
+    assert set(summary["cells"]) == {"dual_ur5e/implicit/plain", "dual_ur5e/implicit/perturbed"}
+    target = summary["targets"]["dual_ur5e_success"]
+    assert target["target"] == 0.9 and isinstance(target["met"], bool)
