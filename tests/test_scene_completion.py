@@ -123,7 +123,7 @@ def test_the_held_bottle_with_a_hidden_top_reaches_its_class_height_under_the_ce
     low_board[labels == 1, 2] = 0.88  # a board right above: the top stops below it (once completed)
     done, lab = complete_cloud(low_board, labels, CLASSES, exclude=[2], label_names=NAMES)
     lo, hi = completed_bounds(neck, furniture, "bottle", done[lab != 2])
-    assert hi[2] == pytest.approx(0.88 - PANEL - 0.03, abs=1e-9)  # under the board's underside
+    assert hi[2] == pytest.approx(0.88 - PANEL - 0.06, abs=1e-9)  # under the board's underside
 
 
 def test_a_seen_top_face_is_not_extended() -> None:

@@ -73,6 +73,9 @@ class GraspDepthConfig:
     place_height: float = 0.04
     #: A carried object turns smoothly from its grasp to its release orientation (else: planned) [-].
     hold_orientation: bool = True
+    #: Turn the gripper about its approach axis so the fingers close across a handle bar [-]
+    #: (:mod:`hsi_retarget.handle_grip`; needs the scene spec).
+    across_bars: bool = True
 
     def __post_init__(self) -> None:
         for name in ("palm_offset", "grasp_depth", "standoff", "lift", "place_height"):

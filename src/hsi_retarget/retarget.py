@@ -28,6 +28,7 @@ from hsi_planning.mocap import lowpass
 from hsi_planning.trajectory import WristTrajectory
 from hsi_retarget.collision import SceneDistance
 from hsi_retarget.grasp_depth import GraspDepthConfig, grasp_windows, shape_grasps
+from hsi_retarget.handle_grip import handle_bar_axes, turn_across_bars
 from hsi_retarget.human_motion import SIDES, HumanMotion
 from hsi_retarget.humanoid_ik import SupportConfig, plan_footsteps
 from hsi_retarget.ik import IKConfig, IKSolver, IKTargets
@@ -91,20 +92,27 @@ def _free_objects(scene: Any, motion: HumanMotion) -> list[str]:
     return sorted({e.object_name for e in motion.events if e.object_name and "/" not in e.object_name})
 
 
-def _human_motion(source: Source, cfg: RetargetConfig, scene: Any = None) -> HumanMotion:
+def _human_motion(
+    source: Source, cfg: RetargetConfig, scene: Any = None
+) -> tuple[HumanMotion, list[dict[str, Any]]]:
+    """The human goals of ``source`` (a schedule's with gripper goals around its grasps when
+    ``cfg.grasp`` is set) and the handle grasps turned across their bars."""
     if isinstance(source, HumanMotion):
-        return source
+        return source, []
     if hasattr(source, "keyframes") and hasattr(source, "segments"):  # a Schedule
         schedule = cast("Schedule", source)
         motion = human_motion_from_schedule(schedule, cfg.sample_rate)
+        turns: list[dict[str, Any]] = []
         if cfg.grasp is not None:
             windows = grasp_windows(schedule, _free_objects(scene, motion), cfg.grasp)
+            if cfg.grasp.across_bars and hasattr(scene, "furniture"):  # a scene spec: its handle bars
+                motion, turns = turn_across_bars(motion, windows, handle_bar_axes(scene))
             motion = shape_grasps(motion, windows, cfg.grasp)
-        return motion
+        return motion, turns
     segments = [source] if isinstance(source, WristTrajectory) else list(source)
     if not all(isinstance(s, WristTrajectory) for s in segments):
         raise RetargetError("retarget() takes a HumanMotion, a Schedule or WristTrajectory segments")
-    return human_motion_from_wrists(segments, cfg.hip, rate=cfg.sample_rate)
+    return human_motion_from_wrists(segments, cfg.hip, rate=cfg.sample_rate), []
 
 
 def _scene(scene: Any, motion: HumanMotion, source: Any) -> SceneDistance | None:
@@ -241,7 +249,7 @@ def retarget(
     """
     cfg = config or RetargetConfig()
     model = robot if isinstance(robot, RobotModel) else RobotModel(robot)
-    motion = _human_motion(source, cfg, scene)
+    motion, handle_turns = _human_motion(source, cfg, scene)
     mapping = cfg.mapping or MappingConfig(anchor="shoulder" if motion.shoulder_position else "world")
     t0 = time.perf_counter()
     goals = map_to_robot(motion, model, mapping)
@@ -292,6 +300,7 @@ def retarget(
         "goal_position": {s: goals.tcp[s][:, :3, 3] for s in goals.tcp},
         "goal_time": goals.t,
         "time_scaling": timing.summary(goals.t),
+        "handle_turns": handle_turns,
         **diag,
     }
     if np.isfinite(goals.lift).any():

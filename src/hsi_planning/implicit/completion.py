@@ -36,8 +36,8 @@ SUPPORT_GAP = 0.01
 SEEN_BOTTOM = 0.02
 #: [-] scale range of generated objects around their class's default size (layout generator: 0.8–1.25).
 CLASS_SCALE = (0.8, 1.25)
-#: [m] gap kept between an extended top and the obstacle observed above it.
-CEILING_GAP = 0.03
+#: [m] gap kept between an extended top and the obstacle observed above it (room to lift it off).
+CEILING_GAP = 0.06
 #: [m] points this close below an object's highest point belong to its top face; [-] share of them on a
 #: horizontal surface when the top face was seen.
 TOP_BAND, TOP_SHARE = 0.01, 0.5

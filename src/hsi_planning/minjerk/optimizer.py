@@ -12,9 +12,12 @@ line. Constraints at ``checks_per_segment`` points per knot interval (ends exclu
 - knot positions inside the distance grids (where the field is known).
 
 IPOPT runs with the exact Hessian (the field is C²), the adaptive barrier update, quietly
-(``print_level 0``, ``sb yes``), bounded by ``max_iterations`` and ``max_wall_time``. Any status other
-than ``Solve_Succeeded`` / ``Solved_To_Acceptable_Level``, or a result that still violates a clearance
-by more than ``constraint_tolerance``, raises :class:`PlanningError` naming the IPOPT return status.
+(``print_level 0``, ``sb yes``), bounded by ``max_iterations`` and ``max_wall_time``. A numerical stop
+(``Error_In_Step_Computation``, ``Restoration_Failed``, ``Maximum_Iterations_Exceeded``) on an iterate that
+satisfies every constraint within ``constraint_tolerance`` is kept (status ``feasible (...)``: collision-
+free and within the bounds, its jerk not proven minimal). Any other status, or a result that still
+violates a clearance by more than ``constraint_tolerance``, raises :class:`PlanningError` naming the
+IPOPT return status.
 """
 
 from __future__ import annotations
@@ -44,6 +47,8 @@ _LOG = logging.getLogger(__name__)
 
 F64 = NDArray[np.float64]
 _SUCCESS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+#: IPOPT stops that can leave a feasible, not yet optimal iterate (kept when every constraint holds).
+_NUMERICAL = ("Error_In_Step_Computation", "Restoration_Failed", "Maximum_Iterations_Exceeded")
 #: [m] knots stay this far inside the field box, so the curve between knots stays inside too.
 _BOX_INSET = 0.03
 
@@ -290,14 +295,21 @@ def solve_min_jerk(
     spline = QuinticSpline(duration, sol[:k], sol[k : 2 * k], sol[2 * k :])
     worst = margins(spline, spheres, cfg)
     min_margin = float(worst.min()) if worst.size else math.inf
-    if status not in _SUCCESS:
+    g = np.asarray(result["g"], dtype=np.float64).reshape(-1)
+    lo_g, hi_g = np.concatenate(lbg), np.concatenate(ubg)
+    violation = float(max(0.0, np.max(lo_g - g, initial=0.0), np.max(g - hi_g, initial=0.0)))
+    if status in _NUMERICAL and violation <= cfg.constraint_tolerance:
+        # IPOPT stalled on a feasible iterate (bounds, ends and clearance hold): keep it, say so.
+        _LOG.info("min-jerk: IPOPT %s after %d iterations on a feasible iterate; kept", status, iters)
+        status = f"feasible ({status})"
+    elif status not in _SUCCESS:
         raise PlanningError(
             f"IPOPT did not find a collision-free minimum-jerk trajectory: return status {status} after "
             f"{iters} iterations ({t2 - t1:.2f} s; worst clearance margin {min_margin:+.3f} m; warm start "
             f"{warm_start or 'straight'}); the goal may be enclosed by obstacles or the duration and "
             "bounds too tight"
         )
-    if min_margin < -cfg.constraint_tolerance:
+    if min_margin < -cfg.constraint_tolerance:  # the check points between the constraint samples
         raise PlanningError(
             f"IPOPT returned {status} but the trajectory violates the clearance by {-min_margin:.4f} m "
             f"(> constraint_tolerance {cfg.constraint_tolerance} m)"
