@@ -153,3 +153,18 @@ def test_panels_seen_from_above_get_their_underside() -> None:
     assert (under <= 1e-9).all()
     added = out[(lab == 0) & (np.arange(len(out)) >= len(points))]
     assert (added[:, 2] <= 0.7 - PANEL + 1e-9).all()  # only what lies in the region is thickened
+
+
+def test_a_held_object_with_a_hidden_bottom_reaches_down_its_class_height() -> None:
+    rng = np.random.default_rng(2)
+    top = np.column_stack(
+        [rng.uniform(0.5, 0.56, 200), rng.uniform(0.0, 0.06, 200), rng.uniform(0.6, 0.68, 200)]
+    )
+    top[:40, 2] = 0.68  # a seen top face
+    deep_floor = _plane((0.4, 0.7), (-0.1, 0.2), 0.3, 0.01)  # far below: not a support in reach
+    lo, hi = completed_bounds(top, np.zeros((0, 3)), "bottle", deep_floor)
+    assert hi[2] == pytest.approx(0.68)
+    assert lo[2] == pytest.approx(0.68 - class_height("bottle")[1])
+    shelf = _plane((0.4, 0.7), (-0.1, 0.2), 0.45, 0.01)  # an obstacle under it: not lower than that
+    lo, _ = completed_bounds(top, np.zeros((0, 3)), "bottle", shelf)
+    assert lo[2] == pytest.approx(0.45)

@@ -71,6 +71,22 @@ def _normals_z(points: F64, tree_points: F64) -> F64:
     return np.asarray(np.abs(vec[:, 2, 0]), dtype=np.float64)
 
 
+def bottom_seen(target_points: ArrayLike, furniture_points: ArrayLike) -> bool:
+    """Whether the target (N, 3) [m] was seen standing on furniture (M, 3) [m]: furniture within
+    ``SEEN_BOTTOM`` of its visible bottom, under its footprint."""
+    tp = np.asarray(target_points, dtype=np.float64).reshape(-1, 3)
+    fp = np.asarray(furniture_points, dtype=np.float64).reshape(-1, 3)
+    if tp.shape[0] == 0 or fp.shape[0] == 0:
+        return False
+    lo, hi = tp.min(axis=0), tp.max(axis=0)
+    under = (
+        (fp[:, :2] >= lo[:2] - SEEN_BOTTOM).all(axis=1)
+        & (fp[:, :2] <= hi[:2] + SEEN_BOTTOM).all(axis=1)
+        & (np.abs(fp[:, 2] - lo[2]) <= SEEN_BOTTOM)
+    )
+    return bool(under.any())
+
+
 def support_height(target_points: ArrayLike, furniture_points: ArrayLike) -> float | None:
     """[m] height of the support surface under a target seen as ``target_points`` (N, 3) [m], from the
     ``furniture_points`` (M, 3) [m]; None when furniture lies right under the visible bottom (it was
@@ -82,12 +98,7 @@ def support_height(target_points: ArrayLike, furniture_points: ArrayLike) -> flo
     if tp.shape[0] == 0 or fp.shape[0] < _NEIGHBOURS:
         return None
     lo, hi = tp.min(axis=0), tp.max(axis=0)
-    under = (
-        (fp[:, :2] >= lo[:2] - SEEN_BOTTOM).all(axis=1)
-        & (fp[:, :2] <= hi[:2] + SEEN_BOTTOM).all(axis=1)
-        & (np.abs(fp[:, 2] - lo[2]) <= SEEN_BOTTOM)
-    )
-    if under.any():  # the target stands on observed furniture
+    if bottom_seen(tp, fp):  # the target stands on observed furniture
         return None
     near = (
         (fp[:, :2] >= lo[:2] - SUPPORT_SEARCH).all(axis=1)
@@ -132,25 +143,39 @@ def completed_bounds(
     obstacle_points: ArrayLike | None = None,
 ) -> tuple[F64, F64]:
     """(lo (3,), hi (3,)) [m] box of the target: its visible points' box extended down to the support
-    surface (:func:`support_height`) when one is found below it, and, for an object of class ``kind``
-    that looks shorter than the class can be, up to the class's largest height, below the lowest of the
-    ``obstacle_points`` (M, 3) [m] above its footprint (less ``CEILING_GAP``)."""
+    surface (:func:`support_height`) when one is found below it. For an object of class ``kind`` that
+    looks shorter than the class can be: with its bottom known (support found or seen) and its top not
+    seen, up to the class's largest height, below the lowest of the ``obstacle_points`` (M, 3) [m] above
+    its footprint (less ``CEILING_GAP``); with its bottom unknown (a deep drawer hides it), down to the
+    class's largest height below its top, not below the highest obstacle point under its footprint."""
     tp = np.asarray(target_points, dtype=np.float64).reshape(-1, 3)
-    lo, hi = tp.min(axis=0), tp.max(axis=0).copy()
-    z = support_height(tp, furniture_points)
+    fp = np.asarray(furniture_points, dtype=np.float64).reshape(-1, 3)
+    lo, hi = tp.min(axis=0).copy(), tp.max(axis=0).copy()
+    z = support_height(tp, fp)
     if z is not None:
-        lo = lo.copy()
         lo[2] = min(lo[2], z)
-    if kind in DEFAULTS:
-        smallest, largest = class_height(kind)
-        if hi[2] - lo[2] < smallest and not top_seen(tp):
+    if kind not in DEFAULTS:
+        return lo, hi
+    smallest, largest = class_height(kind)
+    if hi[2] - lo[2] >= smallest:
+        return lo, hi
+    op = (
+        np.zeros((0, 3))
+        if obstacle_points is None
+        else np.asarray(obstacle_points, np.float64).reshape(-1, 3)
+    )
+    over = (op[:, :2] >= lo[:2]).all(axis=1) & (op[:, :2] <= hi[:2]).all(axis=1)
+    if z is not None or bottom_seen(tp, fp):
+        if not top_seen(tp):
             top = lo[2] + largest
-            if obstacle_points is not None:
-                op = np.asarray(obstacle_points, dtype=np.float64).reshape(-1, 3)
-                above = (
-                    (op[:, :2] >= lo[:2]).all(axis=1) & (op[:, :2] <= hi[:2]).all(axis=1) & (op[:, 2] > hi[2])
-                )
-                if above.any():
-                    top = min(top, float(op[above, 2].min()) - CEILING_GAP)
+            above = over & (op[:, 2] > hi[2])
+            if above.any():
+                top = min(top, float(op[above, 2].min()) - CEILING_GAP)
             hi[2] = max(hi[2], top)
+    else:
+        bottom = hi[2] - largest
+        below = over & (op[:, 2] < lo[2])
+        if below.any():
+            bottom = max(bottom, float(op[below, 2].max()))
+        lo[2] = min(lo[2], bottom)
     return lo, hi

@@ -53,7 +53,7 @@ class Clearance:
         longest = float(np.linalg.norm(pb - pa, axis=2).max())
         u = np.linspace(0.0, 1.0, max(2, int(np.ceil(longest / step)) + 1)).reshape(1, -1, 1)
         samples = pa + u * (pb - pa)
-        dist = self(samples.reshape(-1, 3)).reshape(pb.shape[0], -1)
+        dist = self(samples.reshape(-1, 3), bound=radius + 1e-6).reshape(pb.shape[0], -1)
         return np.asarray((dist >= radius).all(axis=1))
 
 

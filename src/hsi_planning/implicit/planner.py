@@ -13,7 +13,8 @@ Pipeline of :meth:`ImplicitPlanner.plan`:
 4. **Remaining time** φ̂ = 1/D̂_toa, evaluated where needed (every ``field_stride``-th node).
 5. **Start point** x_s (Eq. 11), **descent** of ∇φ̂ to the contact, fast-marching **repair** of φ̂ with
    the learned speed when the learned field leads into a dead end or too close to an obstacle.
-6. **Shaping**: smoothed, timed from φ̂ (v = 1/|∇φ̂|) rest to rest under speed/acceleration limits,
+6. **Shaping**: smoothed, timed rest to rest under speed/acceleration limits with the matched prior's
+   speed profile over normalized arc length (``timing="prior"``; ``"field"``: v = 1/|∇φ̂|),
    resampled at ``sample_rate``; orientation transferred from τ_prior (Eq. 12), the start blended from
    the wrist's current orientation, the leave rotated to start exactly at the approach's contact pose.
 

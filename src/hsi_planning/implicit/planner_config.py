@@ -8,6 +8,7 @@ from dataclasses import dataclass, fields
 from hsi_planning.errors import ConfigError
 
 REPAIR_MODES: tuple[str, ...] = ("fallback", "always", "never")
+TIMING_MODES: tuple[str, ...] = ("prior", "field")
 
 
 @dataclass(frozen=True)
@@ -51,6 +52,9 @@ class ImplicitPlannerConfig:
     lift_pad: float = 0.05
     phi_cap_factor: float = 1.2  #: [-] Eq. 11 candidates need φ̂ ≤ this × the prior's duration
     repair: str = "fallback"  #: [-] fast-marching repair of φ̂: fallback (when needed), always, never
+    #: [-] speed along the path: "prior" (the matched demonstration's profile over normalized arc length)
+    #: or "field" (1/|∇φ̂| of the descended field)
+    timing: str = "prior"
     crop_margin: float = 0.3  #: [m] obstacle points farther than this outside the planning region are ignored
     threads: int = 1  #: [-] torch threads while planning (1: fastest on busy shared cores); 0 = leave as is
     seed: int = 0  #: [-] seed of the fit's point subsampling and the obstacle anchors
@@ -105,5 +109,7 @@ class ImplicitPlannerConfig:
             raise ConfigError(f"min_speed {self.min_speed} must be below max_speed {self.max_speed} [m/s]")
         if not 0.0 <= self.blend_fraction <= 1.0:
             raise ConfigError(f"blend_fraction={self.blend_fraction} must be in [0, 1]")
+        if self.timing not in TIMING_MODES:
+            raise ConfigError(f"timing={self.timing!r} must be one of {list(TIMING_MODES)}")
         if self.repair not in REPAIR_MODES:
             raise ConfigError(f"repair={self.repair!r} must be one of {list(REPAIR_MODES)}")

@@ -37,7 +37,7 @@ _CARRIED_BOUND = 0.05
 #: [-] z component of an approach axis that reaches down into a container (drawer, box, counter).
 TOP_DOWN = 0.7
 #: [m] around such a contact the wrist stays above the contact's height (the unseen rim and bottom).
-_UNDER_RADIUS = 0.3
+UNDER_RADIUS = 0.3
 #: [m] how much a lifted box's sampled clearance may fall below its start (face samples vs cloud points).
 _LIFT_NOISE = 0.004
 #: Share of ``clearance_relax`` used for the free-node mask (distance to the contact < path length).
@@ -197,7 +197,7 @@ def wrist_free(ctx: SegmentContext, *, carrying: bool) -> Callable[[float], NDAr
     relax = _MASK_RELAX * cfg.clearance_relax  # paths are longer than the straight distance r
     axis = ctx.approach_axis
     if axis is not None and float(axis[2]) > TOP_DOWN:  # reaching down into a container: not from under
-        under = (np.linalg.norm(rel[:, :2], axis=1) <= _UNDER_RADIUS) & (rel[:, 2] < -2.0 * grid.resolution)
+        under = (np.linalg.norm(rel[:, :2], axis=1) <= UNDER_RADIUS) & (rel[:, 2] < -2.0 * grid.resolution)
         open_nodes = open_nodes & ~under.reshape(grid.shape)
 
     def free(margin: float) -> NDArray[np.bool_]:

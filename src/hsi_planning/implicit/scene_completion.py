@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial import ConvexHull, Delaunay, QhullError, cKDTree
+from scipy.spatial import ConvexHull, QhullError, cKDTree
 
 from hsi_planning.implicit.completion import CLASS_SCALE, SUPPORT_DROP, furniture_mask, support_height
 from hsi_planning.scene.objects import DEFAULTS
@@ -93,13 +93,14 @@ def _hull_fill(xy: F64, spacing: float) -> F64:
     if xy.shape[0] < 3:
         return np.zeros((0, 2))
     try:
-        tri = Delaunay(xy[ConvexHull(xy).vertices])
+        hull = ConvexHull(xy)
     except QhullError:
         return np.zeros((0, 2))
     lo, hi = xy.min(axis=0), xy.max(axis=0)
     axes = [np.arange(lo[i], hi[i] + 0.5 * spacing, spacing) for i in range(2)]
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 2)
-    return np.asarray(grid[tri.find_simplex(grid) >= 0], dtype=np.float64)
+    inside = (grid @ hull.equations[:, :2].T + hull.equations[:, 2] <= 1e-9).all(axis=1)
+    return np.asarray(grid[inside], dtype=np.float64)
 
 
 def _levels(z_lo: float, z_hi: float, spacing: float) -> F64:

@@ -29,7 +29,13 @@ from hsi_planning.implicit.path import (
     time_path,
 )
 from hsi_planning.implicit.prior import transfer_orientation
-from hsi_planning.implicit.runtime_field import TOP_DOWN, SegmentContext, repair_field, wrist_free
+from hsi_planning.implicit.runtime_field import (
+    TOP_DOWN,
+    UNDER_RADIUS,
+    SegmentContext,
+    repair_field,
+    wrist_free,
+)
 from hsi_planning.trajectory import WristTrajectory
 
 __all__ = ["SegmentContext", "SegmentPlan", "plan_segment"]
@@ -62,7 +68,7 @@ def _violation(positions: F64, ctx: SegmentContext, carrying: bool) -> tuple[flo
     from_contact = arc_length(positions[::-1])[::-1]
     full = cfg.hand_radius + cfg.check_margin
     need = required_clearance(from_contact, full, ctx.contact_clear, cfg.clearance_relax)
-    margins = ctx.clearance(positions) - need
+    margins = ctx.clearance(positions, bound=full + 0.01) - need  # (beyond: no violation)
     what = "the hand"
     if carrying:  # the held object: free of the support once lifted, then keeping check_margin
         after = np.clip((from_contact - ctx.lift) / cfg.clearance_relax, 0.0, 1.0)
@@ -81,8 +87,9 @@ def _keep_above_lift(path: F64, ctx: SegmentContext) -> F64:
     the container around the contact (horizontally within the held object's footprint + ``lift_pad``)
     raised to at least the lift top: the carried object stays above the walls and neighbours it was
     lifted over (what stands behind a wall is hidden from the cameras). For an empty hand reaching
-    down into a container (approach axis within ~45° of vertical) the path stays above the contact
-    there: it enters from above, not under the unseen rim or bottom."""
+    down into a container (approach axis within ~45° of vertical), within ``UNDER_RADIUS`` of the
+    contact the path only rises away from it (both ways: it enters from above and leaves upwards, not
+    under the unseen rim or into what stands hidden behind the walls)."""
     top_down = ctx.approach_axis is not None and float(ctx.approach_axis[2]) > TOP_DOWN
     if (ctx.lift <= 0.0 and not top_down) or path.shape[0] < 3:
         return path
@@ -92,6 +99,11 @@ def _keep_above_lift(path: F64, ctx: SegmentContext) -> F64:
     head = out[:-2]
     over = np.linalg.norm(head[:, :2] - ctx.contact[:2], axis=1) <= reach
     head[over, 2] = np.maximum(head[over, 2], top)
+    if top_down:  # over the container, away from the contact, the path only rises
+        rev = out[::-1]
+        near = np.linalg.norm(rev[:, :2] - ctx.contact[:2], axis=1) <= UNDER_RADIUS
+        k = int(np.argmin(near)) if not near.all() else near.shape[0]
+        rev[:k, 2] = np.maximum.accumulate(rev[:k, 2])
     return out
 
 
@@ -136,6 +148,18 @@ def _connect_clear(
         return ok
 
     return clear
+
+
+def _prior_speed(prior: WristTrajectory, arc: F64) -> F64:
+    """(N,) [m/s] the matched demonstration's speed profile over normalized arc length (approach order),
+    scaled to a path of arc lengths ``arc`` (N,) [m] so that it takes the demonstration's duration."""
+    pos = prior.position if prior.segment == "approach" else prior.position[::-1]
+    t = prior.t if prior.segment == "approach" else (prior.t[-1] - prior.t)[::-1]
+    arc_p = arc_length(pos)
+    if arc_p[-1] < 1e-6 or t.shape[0] < 2:
+        return np.full(arc.shape[0], arc[-1] / max(prior.duration, 1e-3))
+    v_p = np.gradient(arc_p, t)
+    return np.asarray(np.interp(arc / arc[-1], arc_p / arc_p[-1], v_p) * (arc[-1] / arc_p[-1]), np.float64)
 
 
 def _always(x: F64) -> NDArray[np.bool_]:
@@ -272,6 +296,8 @@ def plan_segment(
         path = smooth_path(raw, cfg.path_smoothing, cfg.path_step)
         arc_raw, arc_new = arc_length(raw), arc_length(path)
         v = np.interp(arc_new / arc_new[-1], arc_raw / arc_raw[-1], speed)
+        if cfg.timing == "prior":
+            v = _prior_speed(prior, arc_new)
         t = time_path(
             path,
             v,
