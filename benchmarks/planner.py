@@ -38,6 +38,7 @@ import argparse
 import json
 import logging
 import math
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -121,6 +122,9 @@ def markdown(results: dict[str, Any]) -> str:
     lines = [
         f"# Implicit planner benchmark ({results['cases']} unseen layouts, seed {results['seed']})",
         "",
+        f"Command: `{results.get('command', 'python benchmarks/planner.py')}` (2 shared CPU cores; planning",
+        "times include the cloud completion and both segments).",
+        "",
         "| model | " + " | ".join(c[1] for c in cols) + " |",
         "|---" * (len(cols) + 1) + "|",
     ]
@@ -160,6 +164,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.ablation.is_file():
         models["implicit (t, toa)"] = args.ablation
     results: dict[str, Any] = {"seed": args.seed, "cases": len(cases), "hand_radius": args.hand_radius}
+    results["command"] = "python benchmarks/planner.py " + " ".join(
+        argv if argv is not None else sys.argv[1:]
+    )
     results["models"], results["rows"] = {}, {}
     for name, path in models.items():
         planner = ImplicitPlanner(path, ImplicitPlannerConfig(hand_radius=args.hand_radius))
