@@ -144,17 +144,23 @@ def main(argv: list[str] | None = None) -> int:
     )
     rows: list[dict[str, Any]] = []
     bar = tqdm(total=len(jobs), desc="episodes", unit="ep", file=sys.stderr)
+    args.out.mkdir(parents=True, exist_ok=True)
+    partial = args.out / "pick_place.partial.json"
+
+    def keep(row: dict[str, Any]) -> None:  # a long run that is stopped keeps what it measured
+        rows.append(row)
+        bar.update()
+        partial.write_text(json.dumps(finite({"rows": rows}), allow_nan=False) + "\n")
+
     if args.workers == 1:
         _init_worker()
         for job in jobs:
-            rows.append(_run(job))
-            bar.update()
+            keep(_run(job))
     else:
         context = multiprocessing.get_context("spawn")
         with context.Pool(args.workers, initializer=_init_worker) as pool:
             for row in pool.imap(_run, jobs):
-                rows.append(row)
-                bar.update()
+                keep(row)
     bar.close()
     wall = time.perf_counter() - t_start
     results: dict[str, Any] = {
@@ -174,6 +180,7 @@ def main(argv: list[str] | None = None) -> int:
     text = markdown(results)
     (args.out / "pick_place.md").write_text(text)
     plot(args.out / "pick_place.png", results, rows)
+    partial.unlink(missing_ok=True)
     print(text)
     per = wall / max(len(rows), 1)
     print(f"wrote {args.out}/pick_place.{{json,md,png}} ({wall:.0f} s, {per:.1f} s/episode)")
