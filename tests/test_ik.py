@@ -255,3 +255,21 @@ def test_scene_distance_is_signed_and_robust_next_to_edges() -> None:
     assert np.all(SceneDistance({"box": box}).query(step)[0] > dist)
     with pytest.raises(RetargetError, match="no scene mesh"):
         SceneDistance({"box": box}, exclude=["box"])
+
+
+def test_a_hand_at_a_contact_wins_over_the_base_goal(robots: dict[str, RobotModel]) -> None:
+    """Contact weights: with the base held at its goal, a TCP goal out of reach is closed further when the
+    hand is at a contact; invalid factors are rejected."""
+    robot = robots["dual_ur5e"]
+    solver = IKSolver(robot, IKConfig(self_collision=False))
+    goal = robot.frame_pose(robot.q_home, robot.tcp_frames["right"])
+    goal[:3, 3] += [0.45, -0.1, -0.35]  # farther than the arm reaches with the base at its goal
+    root = np.eye(4)
+    errors = []
+    for contact in (0.0, 1.0):
+        targets = IKTargets(tcp={"right": goal}, root=root, contact={"right": contact} if contact else {})
+        result = solver.solve(np.array(robot.q_home), targets, 150)
+        errors.append(result.position_error["right"])
+    assert errors[1] < 0.5 * errors[0] and errors[0] > 0.01
+    with pytest.raises(ConfigError):
+        IKConfig(contact_position_factor=0.5)

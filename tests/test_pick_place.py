@@ -116,7 +116,7 @@ def _angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 def test_gripper_goals_around_the_grasps(dual_arm: TaskOutcome) -> None:
     schedule = dual_arm.schedule
     assert schedule is not None
-    cfg = GraspDepthConfig(palm_offset=0.06, grasp_depth=0.03, standoff=0.08, lift=0.01)
+    cfg = GraspDepthConfig(palm_offset=0.06, grasp_depth=0.03, standoff=0.08, top_standoff=0.0, lift=0.01)
     motion = human_motion_from_schedule(schedule, 60.0)
     windows = grasp_windows(schedule, ["can1"], cfg)
     assert [(w.kind, w.target, w.free) for w in windows] == [
@@ -146,6 +146,10 @@ def test_gripper_goals_around_the_grasps(dual_arm: TaskOutcome) -> None:
     approach = (t >= start) & (t <= end)  # the line starts at the pre-grasp pose, standoff before the grasp
     assert np.linalg.norm(p1[approach] - (goal - cfg.standoff * axis), axis=1).min() < 1e-3
     assert _angle(r1[line], r0[i_g]).max() < 1e-6
+    # a top-down approach comes down from higher up (above the walls of an open drawer), still straight
+    high = shape_grasps(motion, windows, dataclasses.replace(cfg, top_standoff=0.2)).wrist_position[side]
+    assert np.abs(np.cross(high[line] - goal, axis)).max() < 1e-6
+    assert ((high[line] - goal) @ axis).min() < -0.1
     # the first retreat after the grasp lifts the object straight back along the axis (+ lift)
     a0, a1 = grasp.after
     post = goal - 0.08 * axis + [0.0, 0.0, 0.01]

@@ -344,3 +344,122 @@ def test_retarget_node_turns_wrist_segments_into_a_joint_trajectory() -> None:
     assert details["events"][0]["kind"] == "grasp" and report.max_tracking_error_m < 0.01
     with pytest.raises(ConfigError, match="anchor"):
         RetargetNode(transport=make_transport("inproc"), parameters={"anchor": "moon"})
+
+
+# --------------------------------------------------------------------------------- grip turn, carry
+
+
+def test_grippers_close_across_handle_bars_and_narrow_sides() -> None:
+    from hsi_planning.scene_paths import load_scene
+    from hsi_retarget.grasp_depth import GraspWindow
+    from hsi_retarget.grip_turn import (
+        GripTurnConfig,
+        across_bar_angle,
+        handle_bar_axes,
+        narrow_side_angle,
+        object_prims,
+        turn_grips,
+    )
+
+    spec = load_scene("kitchen")
+    bars = handle_bar_axes(spec)
+    assert abs(bars["drawer_unit1/drawer1"][2]) < 1e-9 and abs(abs(bars["cabinet1/door1"][2]) - 1.0) < 1e-9
+    front = np.eye(3)  # wrist x into the front, z up: the fingers close along world y
+    drawer = across_bar_angle(front, bars["drawer_unit1/drawer1"])
+    assert abs(abs(drawer) - np.pi / 2) < 1e-9
+    y_turned = np.cos(drawer) * front[:, 1] + np.sin(drawer) * front[:, 2]
+    assert abs(y_turned @ bars["drawer_unit1/drawer1"]) < 1e-9
+    assert across_bar_angle(front, bars["cabinet1/door1"]) == 0.0  # a vertical bar: already across
+    assert across_bar_angle(front, np.array([1.0, 0.0, 0.0])) == 0.0  # a bar along the approach
+
+    top = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])  # x down, fingers along world y
+    prims = object_prims(spec)
+    cfg = GripTurnConfig()
+    assert narrow_side_angle(top, prims["can1"], cfg) == 0.0  # a can fits between the open fingers
+    mug = narrow_side_angle(top, prims["mug2"], cfg)  # mug2's handle points along world y
+    assert abs(abs(mug) - np.pi / 2) < 1e-9
+
+    n = 61
+    t = np.linspace(0.0, 3.0, n)
+    motion = HumanMotion(
+        t=t,
+        wrist_position={"right": np.tile([0.5, -1.3, 0.7], (n, 1))},
+        wrist_rotation={"right": np.tile(front, (n, 1, 1))},
+        active={"right": np.ones(n, bool)},
+        hip_position=np.tile([0.0, -1.3, 0.95], (n, 1)),
+        hip_yaw=np.zeros(n),
+    )
+    part = "drawer_unit1/drawer1"
+    windows = [
+        GraspWindow("right", "grasp", part, False, 1.0, (0.5, 1.0), (1.0, 1.5)),
+        GraspWindow("right", "release", part, False, 2.0, (1.5, 2.0), (2.0, 2.5)),
+    ]
+    turned, records = turn_grips(motion, windows, bars, prims, GripTurnConfig(turn_s=0.5))
+    rot = turned.wrist_rotation["right"]
+    assert records == [{"hand": "right", "target": part, "time_s": 1.0, "angle_deg": pytest.approx(-90.0)}]
+    np.testing.assert_allclose(rot[:, :, 0], np.tile([1.0, 0.0, 0.0], (n, 1)), atol=1e-9)  # approach kept
+    held = (t >= 1.0) & (t <= 2.0)
+    assert np.abs(rot[held, :, 1] @ bars[part]).max() < 1e-9  # fingers across the bar while held
+    outside = (t <= 0.5) | (t >= 2.5)
+    np.testing.assert_allclose(rot[outside], motion.wrist_rotation["right"][outside], atol=1e-9)
+    assert np.all(np.isfinite(turned.wrist_position["right"]))
+
+
+def test_carry_is_reaimed_from_the_reached_grasp_pose(dual: RobotModel) -> None:
+    from hsi_retarget.carry_correction import correct_carry
+    from hsi_retarget.mapping import RobotGoals
+
+    n = 121
+    t = np.linspace(0.0, 4.0, n)
+    qs = np.tile(dual.q_home, (n, 1))
+    reached = dual.frame_pose(dual.q_home, dual.tcp_frames["left"])
+    planned = np.array(reached)
+    planned[:3, 3] += [0.02, -0.01, 0.015]  # the IK ended 2.7 cm and 10 deg short of the grasp goal
+    planned[:3, :3] = Rotation.from_rotvec([0.0, 0.0, np.radians(10.0)]).as_matrix() @ reached[:3, :3]
+    release = np.array(planned)
+    release[:3, 3] += [0.3, 0.2, 0.1]
+    tcp = np.tile(planned, (n, 1, 1))
+    tcp[t >= 2.0] = release
+    goals = RobotGoals(
+        t=t,
+        tcp={"left": tcp},
+        active={"left": np.ones(n, bool)},
+        reachable={"left": np.ones(n, bool)},
+        reach_excess={"left": np.zeros(n)},
+        root=np.tile(np.eye(4), (n, 1, 1)),
+        lift=np.full(n, np.nan),
+        shoulder={"left": np.zeros((n, 3))},
+        scale=1.0,
+    )
+    events = (ContactEvent(1.0, "left", "grasp", "can1"), ContactEvent(3.0, "left", "release", "can1"))
+    fixed, records, first = correct_carry(goals, qs, dual, events, ease_s=0.5)
+    i_grasp = int(np.searchsorted(t, 1.0 - 1e-9))
+    assert first == i_grasp and len(records) == 1
+    assert records[0]["position_m"] == pytest.approx(np.linalg.norm([0.02, -0.01, 0.015]), abs=1e-9)
+    assert records[0]["angle_deg"] == pytest.approx(10.0, abs=1e-6)
+    out = fixed.tcp["left"]
+    np.testing.assert_allclose(out[:i_grasp], tcp[:i_grasp])  # nothing before the grasp
+    np.testing.assert_allclose(out[i_grasp], reached, atol=1e-9)  # the reached pose from the grasp on
+    delta = np.linalg.inv(planned) @ reached
+    at_release = int(np.searchsorted(t, 3.0 - 1e-9))
+    np.testing.assert_allclose(out[at_release], release @ delta, atol=1e-9)  # placed as planned
+    np.testing.assert_allclose(out[t > 3.5 + 1e-9], tcp[t > 3.5 + 1e-9], atol=1e-9)  # eased out after
+    unchanged, none, start = correct_carry(fixed, qs, dual, events[1:])  # no grasp: nothing to do
+    assert none == [] and start is None and unchanged.tcp["left"] is not fixed.tcp["left"]
+
+
+def test_smoothing_keeps_the_path_where_it_costs_no_clearance(dual: RobotModel) -> None:
+    from hsi_retarget.ik import IKSolver
+    from hsi_retarget.smoothing import keep_clearance, smooth_joints
+
+    rng = np.random.default_rng(3)
+    n = 120
+    t = np.arange(n) / 60.0
+    raw = np.tile(dual.q_home, (n, 1))
+    arm = dual.arm_q_indices("right")
+    raw[:, arm] += 0.02 * rng.standard_normal((n, arm.shape[0]))  # chatter far from the other arm
+    solver = IKSolver(dual)
+    path, restored = keep_clearance(solver, dual, t, raw, 8.0)
+    np.testing.assert_allclose(path, smooth_joints(dual, t, raw, 8.0))
+    assert restored == 0
+    assert np.abs(np.diff(path[:, arm], axis=0)).max() < np.abs(np.diff(raw[:, arm], axis=0)).max()

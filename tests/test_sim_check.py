@@ -16,7 +16,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from hsi_planning.errors import ConfigError, RetargetError
+from hsi_planning.errors import ConfigError, MessageError, RetargetError
 from hsi_planning.scene import handle_position
 from hsi_retarget.joint_trajectory import ContactEvent, JointTrajectory
 from hsi_retarget.robots import RobotModel
@@ -438,6 +438,12 @@ def test_report_json_markdown_and_files(world: SimWorld, tmp_path: object) -> No
     assert len(json.loads(json_path.read_text())) == 2
     assert "Success: 0/2" in md_path.read_text() and reports_markdown([report]).count("| can1 |") == 1
     assert isinstance(report, ExecutionReport)
+    back = ExecutionReport.from_dict(json.loads(json_path.read_text())[0])  # every record survives JSON
+    assert back.to_dict() == json.loads(json.dumps(report.to_dict()))
+    assert back.grasps == report.grasps and back.grasps[-1].kind == "failed"
+    bad = dict(data, grasps=[{"hand": "left"}])
+    with pytest.raises(MessageError):
+        ExecutionReport.from_dict(bad)
 
 
 def test_video_of_an_execution(world: SimWorld, tmp_path: object) -> None:

@@ -1,16 +1,16 @@
-"""Collision geometry for the IK margins: spheres on the robot's links, a distance query to the scene, and
-the linearized distance constraints of the closest sphere pairs (:func:`collision_rows`).
-
-Spheres are derived from the robot description's collision primitives: for each arm, the links between
-the body and the elbow joint (upper arm, shoulder, mount; *proximal*: kept off the scene and the other
-arm, but not checked against the body they hang from) and every link from the elbow joint's link outwards
-(forearm, wrist, gripper body, and the fingers as *tip* spheres, which get a smaller scene margin since
-they must get close to what they grasp), and for the body the links that carry the arms (torso,
-pelvis/base) with their fixed children (head). A capsule/cylinder becomes spheres of its radius along its
-axis, a box spheres of its smallest half extent over its two larger axes (a finger box: spheres of its
-middle half extent along its longest axis). Distances to the scene come from an Open3D
-``RaycastingScene`` of the scene's world-frame meshes (closest point; negative when the point lies clearly
-behind the closest triangle, i.e. inside a closed mesh).
+"""Collision geometry for the IK margins: spheres on the robot's links, a distance query to the scene, and the
+linearized distance constraints of the closest sphere pairs (:func:`collision_rows`). Spheres are derived
+from the robot description's collision primitives: for each arm, the links between the body and the elbow
+joint (upper arm, shoulder, mount; *proximal*: kept off the scene and the other arm, but not checked
+against the body they hang from) and every link from the elbow joint's link outwards (forearm, wrist,
+gripper body, and the fingers as *tip* spheres, which get a smaller scene margin since they must get close
+to what they grasp), and for the body the links that carry the arms (torso, pelvis/base) with their fixed
+children (head). A capsule/cylinder becomes spheres of its radius along its axis, a box spheres of its
+smallest half extent over its two larger axes (a finger box: spheres of its middle half extent along its
+longest axis; the box of a gripper's palm, which comes close to the other arm, is covered completely,
+corners included, by a grid of spheres bulging at most about 15 mm). Distances to the scene come from an
+Open3D ``RaycastingScene`` of the scene's world-frame meshes (closest point; negative when the point lies
+clearly behind the closest triangle, i.e. inside a closed mesh).
 """
 
 from __future__ import annotations
@@ -84,9 +84,28 @@ class SphereSet:
         return np.concatenate(blocks).astype(np.int64) if blocks else np.zeros((0, 2), dtype=np.int64)
 
 
-def _geom_spheres(geom: Geom, max_per_axis: int, finger: bool = False) -> list[tuple[F64, float]]:
+def _covering_grid(pose: F64, half_ext: F64, max_per_axis: int) -> list[tuple[F64, float]]:
+    """Spheres through every corner of their grid cell: the box (half extents (3,) [m]) is inside them."""
+    cell = max(0.5 * float(half_ext.min()), 0.0125)
+    counts = [min(max_per_axis, max(1, math.ceil(float(h) / cell))) for h in half_ext]
+    halves = half_ext / np.asarray(counts)
+    radius = float(np.linalg.norm(halves))
+    grids = [np.linspace(-(h - c), h - c, n) for h, c, n in zip(half_ext, halves, counts, strict=True)]
+    return [
+        (pose[:3, :3] @ np.array([u, v, w]) + pose[:3, 3], radius)
+        for u in grids[0]
+        for v in grids[1]
+        for w in grids[2]
+    ]
+
+
+def _geom_spheres(
+    geom: Geom, max_per_axis: int, finger: bool = False, palm: bool = False
+) -> list[tuple[F64, float]]:
     """(centre (3,) in the link frame [m], radius [m]) covering one primitive."""
     pose = np.asarray(geom.pose, dtype=np.float64)
+    if palm and geom.kind == "box":
+        return _covering_grid(pose, np.asarray(geom.size, dtype=np.float64), max_per_axis)
     if finger and geom.kind == "box":
         half_ext = np.asarray(geom.size, dtype=np.float64)
         order = np.argsort(half_ext)
@@ -121,7 +140,7 @@ def _geom_spheres(geom: Geom, max_per_axis: int, finger: bool = False) -> list[t
     return out
 
 
-def robot_spheres(robot: RobotModel, max_per_axis: int = 6) -> SphereSet:
+def robot_spheres(robot: RobotModel, max_per_axis: int = 12) -> SphereSet:
     """The collision spheres of ``robot`` (see the module docstring for which links get them)."""
     desc = robot.description
     links = {link.name: link for link in desc.links}
@@ -159,11 +178,13 @@ def robot_spheres(robot: RobotModel, max_per_axis: int = 6) -> SphereSet:
         if link.parent in carriers and not link.joints and link.group == "body"
     }
     selected += [(n, "body") for n in sorted(carriers)]
+    finger_links = {link.name for link in desc.links if any(j.name in finger_joints for j in link.joints)}
+    palms = {links[n].parent for n in finger_links}
     frame_ids, frames, centers, radii, groups, tips, proximal, fixed = [], [], [], [], [], [], [], []
     for name, group in selected:
-        finger = any(j.name in finger_joints for j in links[name].joints)
+        finger = name in finger_links
         for geom in links[name].geoms:
-            for centre, radius in _geom_spheres(geom, max_per_axis, finger):
+            for centre, radius in _geom_spheres(geom, max_per_axis, finger, name in palms):
                 tips.append(finger)
                 proximal.append(name in upper)
                 fixed.append(name in upper and not links[name].joints)
@@ -285,6 +306,28 @@ def collision_rows(
     rows = _point_rows(model, data, spheres, centers, idx=ia, dirs=dirs)
     rows -= _point_rows(model, data, spheres, centers, idx=ib, dirs=dirs)
     return rows, -gain * gaps[order], float(gaps[order[0]])
+
+
+def min_gap(
+    spheres: SphereSet,
+    centers: F64,
+    pairs: I64,
+    scene: SceneDistance | None,
+    margins: tuple[float, float, float],
+) -> float:
+    """[m] smallest clearance minus its margin over the spheres (world ``centers`` (S, 3)) against the
+    scene and over ``pairs`` (P, 2) (``margins`` = scene, finger tip, self [m]); ``inf`` with neither."""
+    scene_margin, tip_margin, self_margin = margins
+    best = math.inf
+    if scene is not None:
+        dist, _ = scene.query(centers)
+        slack = dist - spheres.radii - np.where(spheres.tips, tip_margin, scene_margin)
+        best = min(best, float(slack.min(initial=math.inf)))
+    if pairs.shape[0]:
+        a, b = pairs[:, 0], pairs[:, 1]
+        norm = np.linalg.norm(centers[a] - centers[b], axis=1)
+        best = min(best, float((norm - spheres.radii[a] - spheres.radii[b] - self_margin).min()))
+    return best
 
 
 def _point_rows(

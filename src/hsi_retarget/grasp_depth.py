@@ -63,6 +63,9 @@ class GraspDepthConfig:
     ramp_s: float = 0.5
     #: Length of the straight final approach and first retreat along the approach axis; 0 = none [m].
     standoff: float = 0.08
+    #: Its length for a top-down approach (within 30 deg of straight down) or placement; at least
+    #: ``standoff``: the gripper comes down from above the walls of an open drawer or box [m].
+    top_standoff: float = 0.2
     #: Shortest straight part (at most 60 % of its approach or withdrawal) [s].
     straight_min_s: float = 0.3
     #: Shortest straight part of a grasp approach as a share of the approach (at most 0.6) [-].
@@ -73,12 +76,9 @@ class GraspDepthConfig:
     place_height: float = 0.04
     #: A carried object turns smoothly from its grasp to its release orientation (else: planned) [-].
     hold_orientation: bool = True
-    #: Turn the gripper about its approach axis so the fingers close across a handle bar [-]
-    #: (:mod:`hsi_retarget.handle_grip`; needs the scene spec).
-    across_bars: bool = True
 
     def __post_init__(self) -> None:
-        for name in ("palm_offset", "grasp_depth", "standoff", "lift", "place_height"):
+        for name in ("palm_offset", "grasp_depth", "standoff", "top_standoff", "lift", "place_height"):
             if not 0.0 <= getattr(self, name) <= 0.3:
                 raise ConfigError(f"GraspDepthConfig.{name} must be in [0, 0.3] m, got {getattr(self, name)}")
         if not 0.0 <= self.grasp_straight <= 0.6:
@@ -174,6 +174,7 @@ class _Hand:
         self.depth = np.zeros(n)  #: (T,) [m] TCP offset along the planned wrist x axis
         self.line = np.full((n, 3), np.nan)  #: (T, 3) [m] straight-line goals (NaN: none)
         self.own_axis = np.zeros(n, dtype=bool)  #: (T,) depth along the goal's x axis, not the planned one
+        self.near = np.zeros(n)  #: (T,) [0..1] closeness to a contact (:attr:`HumanMotion.contact`)
         self.shifts: list[tuple[NDArray[np.bool_], F64, int, F64]] = []  #: (samples, weight, anchor, goal)
 
     def index(self, time: float) -> int:
@@ -192,8 +193,10 @@ class _Hand:
         span = max(t1 - t0, 1e-9)
         inside = _between(t, t0, t1)
         dist = np.linalg.norm(self.p[inside] - self.p[i], axis=1)
-        length = float(min(cfg.standoff, dist.max(initial=0.0)))
-        far = t[inside][dist >= cfg.standoff - 1e-9]
+        top = w.free and float(rot[2, 0]) < -np.cos(np.radians(30.0))  # approach straight down
+        standoff = max(cfg.top_standoff, cfg.standoff) if top and cfg.standoff > 0.0 else cfg.standoff
+        length = float(min(standoff, dist.max(initial=0.0)))
+        far = t[inside][dist >= standoff - 1e-9]
         straight = min(cfg.straight_min_s, 0.6 * span)
         if before and w.kind == "grasp":  # a gripper needs a longer straight approach than a human hand
             straight = min(max(straight, cfg.grasp_straight * span), 0.6 * span)
@@ -215,11 +218,16 @@ class _Hand:
         """(T, 3) [m] TCP goals: the planned grasp point (the wrist moved by ``depth`` along its planned x
         axis, which a held object follows as planned; along the goal's own x axis on the way to a grasp),
         shifted onto the straight parts, and the lines."""
-        axis = np.where(self.own_axis[:, None], self.orientation()[:, :, 0], self.r[:, :, 0])
+        own_x = self.orientation()[:, :, 0]
+        axis = np.where(self.own_axis[:, None], own_x, self.r[:, :, 0])
         nominal = self.p + self.depth[:, None] * axis
         out = np.array(nominal)
         for mask, weight, anchor, goal in self.shifts:
-            out[mask] += weight[:, None] * (goal - nominal[anchor])
+            # the anchor's nominal goal by the axis rule of the shifted samples (the goal's own x axis or
+            # the planned one), so that the shifted path meets ``goal`` without a jump
+            ref_axis = own_x[anchor] if self.own_axis[mask].any() else self.r[anchor, :, 0]
+            ref = self.p[anchor] + self.depth[anchor] * ref_axis
+            out[mask] += weight[:, None] * (goal - ref)
         lined = np.isfinite(self.line[:, 0])
         out[lined] = self.line[lined]
         return out
@@ -243,6 +251,8 @@ def _approach(hand: _Hand, w: GraspWindow, held: bool) -> None:
         hand.depth[line] = cfg.offset
         hand.own_axis[blend] = not held
     hand.target[line], hand.weight[line] = c.rot, 1.0
+    hand.near[blend] = np.maximum(hand.near[blend], sigma)
+    hand.near[line] = 1.0
     if cfg.standoff > 0.0:
         hand.shifts.append((blend, sigma, hand.index(c.split), pre))
         u = _ease((t[line] - c.split) / max(end - c.split, 1e-9))
@@ -260,6 +270,8 @@ def _retreat(hand: _Hand, w: GraspWindow, held: bool) -> None:
     blend = _between(t, c.split, end) & ~still
     sigma = 1.0 - _ease((t[blend] - c.split) / max(end - c.split, 1e-9))
     hand.target[still], hand.weight[still] = c.rot, 1.0
+    hand.near[still] = 1.0
+    hand.near[blend] = np.maximum(hand.near[blend], sigma)
     if not held:
         hand.target[blend] = c.rot
         hand.weight[blend] = np.maximum(hand.weight[blend], sigma)
@@ -305,19 +317,23 @@ def shape_grasps(
     motion: HumanMotion, windows: Sequence[GraspWindow], config: GraspDepthConfig | None = None
 ) -> HumanMotion:
     """A copy of ``motion`` whose wrist goals around ``windows`` are gripper goals (see the module
-    docstring); samples away from every window are unchanged."""
+    docstring), with :attr:`HumanMotion.contact` set around them; samples away from every window are
+    unchanged."""
     cfg = config if config is not None else GraspDepthConfig()
     positions = dict(motion.wrist_position)
     rotations = dict(motion.wrist_rotation)
+    contact = dict(motion.contact)
     for side in motion.wrist_position:
         own = sorted((w for w in windows if w.hand == side), key=lambda w: w.time)
         if not own:
             continue
         hand = _Hand(motion, side, cfg)
         for i, w in enumerate(own):
+            nxt = next((v for v in own[i + 1 :] if v.target == w.target and v.kind == "release"), None)
             if w.kind == "grasp" and w.free:
-                nxt = next((v for v in own[i + 1 :] if v.target == w.target and v.kind == "release"), None)
                 _carry(hand, w, nxt)
+            elif w.kind == "grasp":  # a door or drawer held: its handle moves along a fixed path
+                hand.near[_between(hand.t, w.time, nxt.time if nxt is not None else w.time)] = 1.0
         for w in own:
             carried = w.free and cfg.hold_orientation
             if w.kind == "grasp" or w.free:
@@ -326,4 +342,5 @@ def shape_grasps(
                 _retreat(hand, w, carried and w.kind == "grasp")
         rotations[side] = hand.orientation()
         positions[side] = hand.positions()
-    return replace(motion, wrist_position=positions, wrist_rotation=rotations)
+        contact[side] = np.maximum(hand.near, contact.get(side, 0.0))
+    return replace(motion, wrist_position=positions, wrist_rotation=rotations, contact=contact)

@@ -33,6 +33,9 @@ class HumanMotion:
         standing_shoulder_height: [m] shoulder height standing; ``None``: hip + the config's offset.
         events: grasp/release events of the motion.
         source: description of where it came from.
+        contact: side -> (T,) [0..1] closeness to a contact (1 on the straight approach into a grasp or
+            release, while the hand holds a door or drawer, on the first retreat); weights the IK's TCP
+            task up there (:class:`~hsi_retarget.ik.IKConfig`). Empty: none.
     """
 
     t: F64
@@ -48,6 +51,7 @@ class HumanMotion:
     standing_shoulder_height: float | None = None
     events: tuple[ContactEvent, ...] = ()
     source: str = ""
+    contact: dict[str, F64] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         t = np.array(self.t, dtype=np.float64, copy=True).reshape(-1)
@@ -89,6 +93,10 @@ class HumanMotion:
             {s: arr(p, (n, 3), "shoulder_position") for s, p in self.shoulder_position.items()},
         )
         object.__setattr__(self, "events", tuple(self.events))
+        contact = {s: arr(c, (n,), "contact") for s, c in self.contact.items()}
+        if not set(contact) <= sides or any(np.any((c < 0.0) | (c > 1.0)) for c in contact.values()):
+            raise RetargetError("HumanMotion.contact: sides with wrist goals, values in [0, 1]")
+        object.__setattr__(self, "contact", contact)
 
     @property
     def n_samples(self) -> int:

@@ -25,7 +25,7 @@ import pinocchio as pin
 from numpy.typing import NDArray
 
 from hsi_planning.errors import ConfigError, RetargetError
-from hsi_retarget.collision import SceneDistance, collision_rows, robot_spheres
+from hsi_retarget.collision import SceneDistance, collision_rows, min_gap, robot_spheres
 from hsi_retarget.humanoid_ik import SupportConfig, support_rows
 from hsi_retarget.mapping import BASE_JOINTS, LIFT_JOINT
 from hsi_retarget.robots import RobotModel
@@ -43,6 +43,11 @@ class IKConfig:
     root_weight: float = 1.0  #: [1/m^2 or 1/rad^2] base / pelvis goal task
     lift_weight: float = 0.05  #: [1/m^2] torso lift goal task
     posture_weight: float = 1e-3  #: [1/rad^2] pull of the arm (and waist/leg) joints to the posture
+    #: [-] TCP position / orientation weight factors at a contact (:attr:`IKTargets.contact` = 1; scaled
+    #: linearly in between): the hand at a grasp wins over the other hand, the posture and the torso lift
+    contact_position_factor: float = 10.0
+    contact_orientation_factor: float = 30.0
+    contact_root_factor: float = 1.5  #: [-] root goal weight factor there (the base follows less)
     damping: float = 1e-4  #: [1/rad^2] Levenberg-Marquardt damping of every step
     max_step: float = 0.05  #: [rad] or [m] largest change of one joint in one step (trust region)
     iterations: int = 200  #: [-] step limit of :meth:`IKSolver.solve`
@@ -58,6 +63,11 @@ class IKConfig:
 
     def __post_init__(self) -> None:
         positive = ("position_weight", "orientation_weight", "max_step", "position_tolerance")
+        factors = (self.contact_position_factor, self.contact_orientation_factor, self.contact_root_factor)
+        if not all(f >= 1.0 for f in factors):
+            raise ConfigError(
+                f"IKConfig.contact_*_factor (position, orientation, root) must be >= 1: {factors}"
+            )
         for name in (*positive, "orientation_tolerance", "activation_distance"):
             if not getattr(self, name) > 0.0:
                 raise ConfigError(f"IKConfig.{name} must be > 0, got {getattr(self, name)}")
@@ -90,6 +100,7 @@ class IKTargets:
         support: feet on the floor whose soles form the CoM support polygon.
         com: (2,) [m] soft CoM goal (humanoid weight shift), ``None``: none.
         posture: (nq,) posture configuration; ``None``: the robot's home.
+        contact: side -> [0..1] closeness of its TCP goal to a contact (scales its task weights up).
     """
 
     tcp: dict[str, F64] = field(default_factory=dict)
@@ -99,6 +110,7 @@ class IKTargets:
     support: tuple[str, ...] = ("left", "right")
     com: F64 | None = None
     posture: F64 | None = None
+    contact: dict[str, float] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -191,11 +203,18 @@ class IKSolver:
 
         for side, goal in targets.tcp.items():
             fid = self._tcp_ids[side]
-            add(self._frame_jacobian(fid), self._pose_error(fid, goal), w_tcp)
+            c = targets.contact.get(side, 0.0)
+            w = w_tcp
+            if c > 0.0:
+                gain = np.repeat([cfg.contact_position_factor, cfg.contact_orientation_factor], 3)
+                w = w_tcp * (1.0 + c * (gain - 1.0))
+            add(self._frame_jacobian(fid), self._pose_error(fid, goal), w)
+        near = max(targets.contact.values(), default=0.0)  # the base moves less for a hand at a contact
+        root_weight = cfg.root_weight * (1.0 + near * (cfg.contact_root_factor - 1.0))
         if targets.root is not None and cfg.root_weight > 0.0:
             goal = np.asarray(targets.root)
             if self.robot.floating:
-                w = np.full(6, cfg.root_weight)
+                w = np.full(6, root_weight)
                 add(self._frame_jacobian(self._pelvis), self._pose_error(self._pelvis, goal), w)
             elif self._base_v:
                 yaw = math.atan2(goal[1, 0], goal[0, 0])
@@ -203,7 +222,7 @@ class IKSolver:
                 err[2] = (err[2] + math.pi) % (2 * math.pi) - math.pi
                 jac = np.zeros((3, nv))
                 jac[[0, 1, 2], self._base_v] = 1.0
-                add(jac, err, np.full(3, cfg.root_weight))
+                add(jac, err, np.full(3, root_weight))
         if targets.lift is not None and self._lift is not None and cfg.lift_weight > 0.0:
             jac = np.zeros((1, nv))
             jac[0, self._lift[1]] = 1.0
@@ -319,10 +338,11 @@ class IKSolver:
     def clearance(self, q: F64) -> float:
         """[m] smallest sphere clearance minus its margin (scene and self) at ``q``; ``inf`` when every pair
         is farther than the activation distance beyond its margin."""
-        q = np.asarray(q, dtype=np.float64)
-        pin.computeJointJacobians(self._model, self._data, q)
-        pin.updateFramePlacements(self._model, self._data)
-        return self._collision_rows(q)[2]
+        cfg = self.config
+        pairs = self._pairs if cfg.self_collision else np.zeros((0, 2), dtype=np.int64)
+        margins = (cfg.scene_margin, cfg.tip_margin, cfg.self_margin)
+        gap = min_gap(self.spheres, self.sphere_centers(q), pairs, self.scene, margins)
+        return gap if gap < cfg.activation_distance else math.inf
 
     def errors(self, q: F64, targets: IKTargets) -> tuple[dict[str, float], dict[str, float]]:
         """TCP position [m] and orientation [rad] errors per side with a goal."""

@@ -27,7 +27,7 @@ A goal farther from the robot's shoulder than its reach is flagged per sample (`
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
@@ -94,6 +94,7 @@ class RobotGoals:
         lift: (T,) [m] torso lift goal (NaN for robots without a lift).
         shoulder: side -> (T, 3) [m] the robot's nominal shoulder positions the goals were mapped about.
         scale: [-] the wrist-offset scale used.
+        contact: side -> (T,) [0..1] closeness to a contact (:attr:`HumanMotion.contact`; empty: none).
     """
 
     t: F64
@@ -105,6 +106,7 @@ class RobotGoals:
     lift: F64
     shoulder: dict[str, F64]
     scale: float
+    contact: dict[str, F64] = field(default_factory=dict)
 
     def unreachable_intervals(self) -> list[dict[str, float | str]]:
         """Contiguous runs of active, unreachable samples: ``side``, ``t_start``/``t_end`` [s],
@@ -273,6 +275,7 @@ def map_to_robot(motion: HumanMotion, robot: RobotModel, config: MappingConfig |
         lift=lift,
         shoulder=shoulder_r,
         scale=float(scale),
+        contact={s: np.array(c) for s, c in motion.contact.items()},
     )
 
 

@@ -24,24 +24,23 @@ import pinocchio as pin
 from numpy.typing import NDArray
 
 from hsi_planning.errors import ConfigError, RetargetError
-from hsi_planning.mocap import lowpass
 from hsi_planning.trajectory import WristTrajectory
+from hsi_retarget.carry_correction import correct_carry
 from hsi_retarget.collision import SceneDistance
 from hsi_retarget.grasp_depth import GraspDepthConfig, grasp_windows, shape_grasps
-from hsi_retarget.handle_grip import handle_bar_axes, turn_across_bars
+from hsi_retarget.grip_turn import GripTurnConfig, handle_bar_axes, object_prims, turn_grips
 from hsi_retarget.human_motion import SIDES, HumanMotion
 from hsi_retarget.humanoid_ik import SupportConfig, plan_footsteps
 from hsi_retarget.ik import IKConfig, IKSolver, IKTargets
 from hsi_retarget.joint_trajectory import ContactEvent, JointTrajectory
 from hsi_retarget.mapping import (
-    BASE_JOINTS,
-    LIFT_JOINT,
     MappingConfig,
     RobotGoals,
     map_to_robot,
     nominal_configuration,
 )
 from hsi_retarget.robots import RobotModel
+from hsi_retarget.smoothing import keep_clearance, smooth_joints  # noqa: F401 (smooth_joints: API)
 from hsi_retarget.sources import human_motion_from_schedule, human_motion_from_wrists
 from hsi_retarget.timing import TimingConfig, time_parameterize
 
@@ -68,14 +67,26 @@ class RetargetConfig:
     smoothing_hz: float = 8.0  #: [Hz] low-pass of a fixed-base robot's arm/base/lift joints; 0: none
     sample_rate: float = 60.0  #: [Hz] sampling of schedules and wrist trajectories
     reach_tolerance: float = 0.01  #: [m] IK position residual above which a goal is reported unreached
+    repair_iterations: int = 4  #: [-] extra IK steps on a frame that ends ``repair_depth`` inside a margin
+    repair_depth: float = 0.005  #: [m] depth inside a collision margin that triggers the extra steps
     hip: tuple[float, float, float] = (0.0, 0.0, 0.0)  #: hip (x [m], y [m], yaw [rad]) for wrist-only input
     #: Gripper goals around the grasps and releases of a schedule (:mod:`hsi_retarget.grasp_depth`);
     #: ``None``: the planned wrist goals as they are.
     grasp: GraspDepthConfig | None = None
+    #: With ``grasp``: the gripper turned about its approach axis to grip across handle bars and the
+    #: narrow side of objects (:mod:`hsi_retarget.grip_turn`; needs the scene spec).
+    grip: GripTurnConfig = field(default_factory=GripTurnConfig)
+    #: Carries re-aimed from the TCP pose reached at their grasp (:mod:`hsi_retarget.carry_correction`) [-].
+    correct_carry: bool = True
 
     def __post_init__(self) -> None:
-        if self.iterations_per_frame < 1 or self.initial_iterations < 1:
-            raise ConfigError("RetargetConfig.iterations_per_frame and initial_iterations must be >= 1")
+        if self.iterations_per_frame < 1 or self.initial_iterations < 1 or self.repair_iterations < 0:
+            raise ConfigError(
+                "RetargetConfig.iterations_per_frame and initial_iterations must be >= 1, "
+                "repair_iterations >= 0"
+            )
+        if not 0.0 <= self.repair_depth < 0.1:
+            raise ConfigError(f"RetargetConfig.repair_depth must be in [0, 0.1) m, got {self.repair_depth}")
         if not self.smoothing_hz >= 0.0:
             raise ConfigError(f"RetargetConfig.smoothing_hz must be >= 0 Hz, got {self.smoothing_hz}")
         if not self.velocity_factor > 0.0 or not self.sample_rate > 0.0 or not self.reach_tolerance > 0.0:
@@ -96,7 +107,7 @@ def _human_motion(
     source: Source, cfg: RetargetConfig, scene: Any = None
 ) -> tuple[HumanMotion, list[dict[str, Any]]]:
     """The human goals of ``source`` (a schedule's with gripper goals around its grasps when
-    ``cfg.grasp`` is set) and the handle grasps turned across their bars."""
+    ``cfg.grasp`` is set, turned to grip across, :mod:`hsi_retarget.grip_turn`) and the grasps turned."""
     if isinstance(source, HumanMotion):
         return source, []
     if hasattr(source, "keyframes") and hasattr(source, "segments"):  # a Schedule
@@ -105,8 +116,9 @@ def _human_motion(
         turns: list[dict[str, Any]] = []
         if cfg.grasp is not None:
             windows = grasp_windows(schedule, _free_objects(scene, motion), cfg.grasp)
-            if cfg.grasp.across_bars and hasattr(scene, "furniture"):  # a scene spec: its handle bars
-                motion, turns = turn_across_bars(motion, windows, handle_bar_axes(scene))
+            if hasattr(scene, "furniture"):  # a scene spec: its handle bars and object shapes
+                bars, prims = handle_bar_axes(scene), object_prims(scene)
+                motion, turns = turn_grips(motion, windows, bars, prims, cfg.grip)
             motion = shape_grasps(motion, windows, cfg.grasp)
         return motion, turns
     segments = [source] if isinstance(source, WristTrajectory) else list(source)
@@ -141,19 +153,29 @@ def _runs(mask: NDArray[np.bool_], t: F64, values: F64, side: str) -> list[dict[
 
 
 def track(
-    goals: RobotGoals, robot: RobotModel, solver: IKSolver, cfg: RetargetConfig
+    goals: RobotGoals,
+    robot: RobotModel,
+    solver: IKSolver,
+    cfg: RetargetConfig,
+    *,
+    start: int = 0,
+    before: F64 | None = None,
 ) -> tuple[F64, dict[str, F64], dict[str, F64], dict[str, Any]]:
     """Frame-by-frame IK of ``goals``: configurations (T, nq), TCP position [m] and orientation [rad] errors
-    per side (T,) (NaN where inactive) and diagnostics (fallbacks, clearance, footsteps)."""
+    per side (T,) (NaN where inactive) and diagnostics (fallbacks, clearance, footsteps). With ``start`` > 0
+    the frames before it are those of ``before`` (T, nq) and the IK goes on from its frame ``start - 1``."""
     n = goals.t.shape[0]
     feet = plan_footsteps(robot, goals.t, goals.root, cfg.support) if robot.floating else None
     q = nominal_configuration(robot, goals.root[0], float(goals.lift[0]))
     qs = np.zeros((n, robot.nq))
+    if start > 0 and before is not None:
+        qs[:start] = before[:start]
+        q = np.array(before[start - 1])
     pos_err = {s: np.full(n, np.nan) for s in goals.tcp}
     ori_err = {s: np.full(n, np.nan) for s in goals.tcp}
     fallbacks, min_clear = 0, np.inf
     tol_p, tol_o = solver.config.position_tolerance, solver.config.orientation_tolerance
-    for i in range(n):
+    for i in range(start if before is not None else 0, n):
         lift = float(goals.lift[i])
         root = goals.root[i]
         if feet is not None and np.isfinite(feet.com[i]).all():  # stepping: pelvis over the stance foot
@@ -167,8 +189,9 @@ def track(
             feet={s: feet.feet[s][i] for s in SIDES} if feet is not None else {},
             support=feet.support[i] if feet is not None else SIDES,
             com=feet.com[i] if feet is not None and np.isfinite(feet.com[i]).all() else None,
+            contact={s: float(c[i]) for s, c in goals.contact.items() if goals.active[s][i] and c[i] > 0.0},
         )
-        if i == 0:
+        if i == 0 or (i == start and before is None):
             result = solver.solve(q, targets, cfg.initial_iterations)
             q, fallbacks = result.q, result.fallbacks
         else:
@@ -181,6 +204,11 @@ def track(
                 pe, oe = solver.errors(q, targets)
                 if all(pe[s] <= tol_p and oe[s] <= tol_o for s in pe):
                     break
+            # a large step can cut into a margin beyond its linearization: push back out on this frame
+            extra = cfg.repair_iterations if info.min_clearance < 0.01 else 0
+            while extra > 0 and solver.clearance(q) < -cfg.repair_depth:
+                q, info = solver.step(q, targets, dt, q_start)
+                extra -= 1
         qs[i] = q
         pe, oe = solver.errors(q, targets)
         for s in pe:
@@ -189,24 +217,6 @@ def track(
     if feet is not None:
         diag["footsteps"] = feet.steps
     return qs, pos_err, ori_err, diag
-
-
-def smooth_joints(robot: RobotModel, t: F64, qs: F64, cutoff_hz: float) -> F64:
-    """Zero-phase low-pass (cut-off ``cutoff_hz`` [Hz]) of the arm joints and the base/lift of ``qs`` (T, nq)
-    sampled at ``t`` (T,) [s], clipped to the joint limits. Removes the IK's frame-to-frame chatter along
-    active collision constraints, which would otherwise force a large time stretch. Fixed-base robots only:
-    a floating robot's arms move with its torso, and its legs must keep the soles exactly in place."""
-    out = np.array(qs)
-    if cutoff_hz <= 0.0 or t.shape[0] < 16 or robot.floating:
-        return out
-    fs = 1.0 / float(np.median(np.diff(t)))
-    if cutoff_hz >= 0.5 * fs:
-        return out
-    names = [j for side in SIDES for j in robot.arm_joints[side]]
-    names += [j for j in (*BASE_JOINTS, LIFT_JOINT) if j in robot.joint_names]
-    idx = np.array([robot.q_index(j) for j in names], dtype=np.int64)
-    out[:, idx] = np.clip(lowpass(qs[:, idx], fs, cutoff_hz), robot.q_lower[idx], robot.q_upper[idx])
-    return out
 
 
 def tcp_errors(robot: RobotModel, goals: RobotGoals, qs: F64) -> tuple[dict[str, F64], dict[str, F64]]:
@@ -257,7 +267,12 @@ def retarget(
     solver = IKSolver(model, cfg.ik, _scene(scene, motion, source), cfg.support)
     t1 = time.perf_counter()
     qs, _, _, diag = track(goals, model, solver, cfg)
-    qs = smooth_joints(model, goals.t, qs, cfg.smoothing_hz)
+    if cfg.correct_carry and motion.events:  # re-aim the carries from the reached grasp poses
+        goals, diag["carry_corrections"], first = correct_carry(goals, qs, model, motion.events)
+        if first is not None:
+            qs, _, _, again = track(goals, model, solver, cfg, start=first + 1, before=qs)
+            diag["qp_fallbacks"] += again["qp_fallbacks"]
+    qs, diag["smoothing_restored_frames"] = keep_clearance(solver, model, goals.t, qs, cfg.smoothing_hz)
     pos_err, ori_err = tcp_errors(model, goals, qs)
     t_ik = time.perf_counter() - t1
     vq, aq = np.full(model.nq, np.inf), np.full(model.nq, np.inf)

@@ -30,27 +30,14 @@ _log = logging.getLogger(__name__)
 
 LAUNCH_FILE = "launch/sim_pick_place.launch.yaml"
 _STAGES = ("schedule", "retarget", "sim")
+#: Retargeting diagnostics the ``retarget`` report carries into the trajectory's ``meta``.
+_RETARGET_META = ("unreachable", "ik_unreached", "time_scaling", "ik_rate_fps")
 
 
 def _report_from_dict(data: dict[str, Any]) -> ExecutionReport:
-    """An :class:`ExecutionReport` with the main fields and failures of a ``to_dict`` dict (details such
-    as collision records stay in the dict)."""
-    nan = float("nan")
-    tracking = data.get("max_tracking_error_m")
-    return ExecutionReport(
-        object=str(data.get("object", "")),
-        robot=str(data.get("robot", "")),
-        planner=str(data.get("planner", "")),
-        success=bool(data.get("success", False)),
-        placement_error_m=data.get("placement_error_m"),
-        duration_s=float(data.get("duration_s", 0.0)),
-        collisions=int(data.get("collisions", 0)),
-        max_tracking_error_m=nan if tracking is None else float(tracking),
-        rms_tracking_error_m=float(data.get("rms_tracking_error_m") or nan),
-        max_joint_error=float(data.get("max_joint_error") or nan),
-        failures=tuple(str(f) for f in data.get("failures", [])),
-        wall_time_s=float(data.get("wall_time_s") or 0.0),
-    )
+    """The :class:`ExecutionReport` of a ``to_dict`` dict, every record included (grasps, collisions, limit
+    violations, perturbations, final object poses)."""
+    return ExecutionReport.from_dict(data)
 
 
 class _Taps:
@@ -82,7 +69,13 @@ class _Taps:
                     str(k.object_name),
                 )
             )
-        self.schedules[str(msg.task_id)] = Schedule(str(msg.task_id), tuple(frames), steps=tuple(msg.steps))
+        part = next(
+            (k.object_name for k in frames if k.contact_event == "grasp" and "/" in k.object_name), ""
+        )
+        info = {"part": part} if part else {}  # the door or drawer the schedule opens (for the diagnosis)
+        self.schedules[str(msg.task_id)] = Schedule(
+            str(msg.task_id), tuple(frames), steps=tuple(msg.steps), info=info
+        )
 
     def on_trajectory(self, msg: Any) -> None:
         from hsi_nodes.nodes.retarget_node import joint_trajectory_from_msg
@@ -95,7 +88,13 @@ class _Taps:
             self.order.append(task)
         self.reports.setdefault(task, {})[str(msg.stage)] = msg
         if str(msg.stage) == "retarget" and self.trajectories:
-            self.reports[task]["trajectory"] = self.trajectories[-1]
+            trajectory = self.trajectories[-1]
+            try:  # the retargeting diagnostics (unreachable goals, IK misses) for the task's diagnosis
+                details = json.loads(str(msg.details_json) or "{}")
+            except ValueError:
+                details = {}
+            meta = {k: details[k] for k in _RETARGET_META if k in details}
+            self.reports[task]["trajectory"] = replace(trajectory, meta={**trajectory.meta, **meta})
 
 
 def _outcome(task: DemoTask, taps: _Taps, config: RunnerConfig) -> TaskOutcome:
@@ -109,7 +108,11 @@ def _outcome(task: DemoTask, taps: _Taps, config: RunnerConfig) -> TaskOutcome:
         if "object" in details:
             # the demo's planner name (the nodes report the planner object's, e.g. human_reach_model)
             report = replace(_report_from_dict(details), planner=cfg.planner)
-            return TaskOutcome(task, report, "done", "", target, None, schedule, trajectory)
+            opening = details.get("opening_max")
+            return TaskOutcome(
+                task, report, "done", "", target, None, schedule, trajectory,
+                opening_max=None if opening is None else float(opening),
+            )  # fmt: skip
     for stage in reversed(_STAGES):
         if stage in got and not bool(got[stage].success):
             reason = f"{stage}: {got[stage].message}"

@@ -12,8 +12,9 @@ first configuration; the robot stands still ``dwell_after_s`` at every gripper e
 During the execution ``/robot/joint_states`` (``sensor_msgs/JointState``, stamped with the node clock plus
 the simulated execution time) goes out at ``joint_state_rate``; afterwards a ``TaskReport`` (stage
 ``sim``) with success, placement error, collisions, tracking error and the full report as
-``details_json``. With ``video`` set, every execution is rendered into that one file. Malformed inputs and
-failed executions are reported, and the node keeps running.
+``details_json`` (plus ``opening_max``: the widest opening [rad or m] of a door or drawer the robot
+grasped, ``null`` without one). With ``video`` set, every execution is rendered into that one file.
+Malformed inputs and failed executions are reported, and the node keeps running.
 """
 
 from __future__ import annotations
@@ -214,7 +215,16 @@ class SimCheckNode(Node[SimCheckNodeConfig]):
                 world.reset()
             placement = info.placement if info.object_name else None
             goal = TaskGoal(info.object_name, placement=placement, planner=info.planner)
-            hooks = [h for h in (self._states(), self._recorder(info)) if h is not None]
+            parts = sorted(
+                {str(e.object_name) for e in full.events if e.kind == "grasp" and "/" in e.object_name}
+            )
+            opened = dict.fromkeys(parts, 0.0)
+
+            def track_opening(w: Any) -> None:
+                for part in parts:
+                    opened[part] = max(opened[part], abs(float(w.opening(part))))
+
+            hooks = [h for h in (self._states(), self._recorder(info), track_opening) if h is not None]
 
             def on_frame(w: Any) -> None:
                 for hook in hooks:
@@ -229,7 +239,8 @@ class SimCheckNode(Node[SimCheckNodeConfig]):
         if self.video is not None:
             verdict = "success" if report.success else "failure"
             self.video.add([f"{task_id}: {verdict}", info.object_name], self._last_recorder)
-        self._publish(task_id, info, report, "", report.duration_s)
+        opening_max = max(opened.values()) if opened else None
+        self._publish(task_id, info, report, "", report.duration_s, opening_max=opening_max)
 
     def _recorder(self, info: _TaskInfo) -> Any:
         self._last_recorder = None
@@ -241,7 +252,16 @@ class SimCheckNode(Node[SimCheckNodeConfig]):
         self._last_recorder = self.video.recorder(self.world, tuple(float(v) for v in target))
         return self._last_recorder
 
-    def _publish(self, task_id: str, info: _TaskInfo, report: Any, error: str, seconds: float) -> None:
+    def _publish(
+        self,
+        task_id: str,
+        info: _TaskInfo,
+        report: Any,
+        error: str,
+        seconds: float,
+        *,
+        opening_max: float | None = None,
+    ) -> None:
         nan = float("nan")
         if report is None:
             success, message, details = False, f"execution failed: {error}", {"error": error}
@@ -249,6 +269,7 @@ class SimCheckNode(Node[SimCheckNodeConfig]):
             success = bool(report.success)
             message = "success" if success else "; ".join(report.failures)
             details = report.to_dict()
+            details["opening_max"] = opening_max  # the widest opening of a door or drawer held [rad or m]
         self.report_pub.publish(
             msg_class(_REPORT)(
                 header=make_header(self.now(), self.config.frame_id),

@@ -90,6 +90,58 @@ class ExecutionReport:
         clean: dict[str, Any] = _finite(out)
         return clean
 
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> ExecutionReport:
+        """The report of a :meth:`to_dict` dict (e.g. read back from JSON): every field, the collision,
+        limit, perturbation and grasp records included (None for a NaN that JSON turned into null; the trace
+        is not part of the dict).
+
+        Raises:
+            MessageError: a record with missing or unknown fields.
+        """
+        from hsi_planning.errors import MessageError
+
+        nan = float("nan")
+
+        def num(key: str, default: float = nan) -> float:
+            value = data.get(key)
+            return default if value is None else float(value)
+
+        def records(key: str, kind: Any) -> tuple[Any, ...]:
+            try:
+                return tuple(kind(**item) for item in data.get(key) or [])
+            except TypeError as exc:
+                raise MessageError(f"ExecutionReport.from_dict: bad {key} record: {exc}") from exc
+
+        placement = data.get("placement_error_m")
+        opening, required = data.get("opening"), data.get("opening_required")
+        return cls(
+            object=str(data.get("object", "")),
+            robot=str(data.get("robot", "")),
+            planner=str(data.get("planner", "")),
+            success=bool(data.get("success", False)),
+            placement_error_m=None if placement is None else float(placement),
+            duration_s=num("duration_s", 0.0),
+            collisions=int(data.get("collisions") or 0),
+            max_tracking_error_m=num("max_tracking_error_m"),
+            rms_tracking_error_m=num("rms_tracking_error_m"),
+            max_joint_error=num("max_joint_error"),
+            opening_part=str(data.get("opening_part") or ""),
+            opening=None if opening is None else float(opening),
+            opening_required=None if required is None else float(required),
+            collision_details=records("collision_details", CollisionRecord),
+            limit_violations=records("limit_violations", LimitViolation),
+            perturbations=records("perturbations", PerturbationRecord),
+            grasps=records("grasps", GraspRecord),
+            object_final_poses={
+                str(k): [float(x) for x in v] for k, v in (data.get("object_final_poses") or {}).items()
+            },
+            failures=tuple(str(f) for f in data.get("failures") or []),
+            replans=int(data.get("replans") or 0),
+            wall_time_s=num("wall_time_s", 0.0),
+            realtime_factor=num("realtime_factor", 0.0),
+        )
+
     def to_json(self, path: str | Path | None = None) -> str:
         """JSON text of :meth:`to_dict`; also written to ``path`` if given."""
         text = json.dumps(self.to_dict(), indent=2)

@@ -1,0 +1,100 @@
+"""Smoothing of the IK's joint paths without giving up its clearances.
+
+The per-frame IK chatters along active collision constraints; :func:`smooth_joints` low-passes the arm,
+base and lift joints (zero phase), which would otherwise force a large time stretch. A low-pass also cuts
+corners: where the IK kept an arm exactly at its margin from the other arm or the scene, the smoothed path
+can pass inside it (and the arms touch in MuJoCo). :func:`keep_clearance` blends the smoothed path back to
+the IK's own solution around every frame where smoothing cost more than ``tolerance`` [m] of clearance.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from hsi_planning.mocap import lowpass
+from hsi_retarget.human_motion import SIDES
+from hsi_retarget.ik import IKSolver
+from hsi_retarget.mapping import BASE_JOINTS, LIFT_JOINT
+from hsi_retarget.robots import RobotModel
+
+__all__ = ["keep_clearance", "smooth_joints"]
+
+F64 = NDArray[np.float64]
+
+
+def smooth_joints(robot: RobotModel, t: F64, qs: F64, cutoff_hz: float) -> F64:
+    """Zero-phase low-pass (cut-off ``cutoff_hz`` [Hz]) of the arm joints and the base/lift of ``qs`` (T, nq)
+    sampled at ``t`` (T,) [s], clipped to the joint limits. Fixed-base robots only: a floating robot's arms
+    move with its torso, and its legs must keep the soles exactly in place."""
+    out = np.array(qs)
+    if cutoff_hz <= 0.0 or t.shape[0] < 16 or robot.floating:
+        return out
+    fs = 1.0 / float(np.median(np.diff(t)))
+    if cutoff_hz >= 0.5 * fs:
+        return out
+    names = [j for side in SIDES for j in robot.arm_joints[side]]
+    names += [j for j in (*BASE_JOINTS, LIFT_JOINT) if j in robot.joint_names]
+    idx = np.array([robot.q_index(j) for j in names], dtype=np.int64)
+    out[:, idx] = np.clip(lowpass(qs[:, idx], fs, cutoff_hz), robot.q_lower[idx], robot.q_upper[idx])
+    return out
+
+
+def _ease(u: F64) -> F64:
+    u = np.clip(u, 0.0, 1.0)
+    return np.asarray(10 * u**3 - 15 * u**4 + 6 * u**5)
+
+
+def _bad_frames(
+    solver: IKSolver, raw: F64, path: F64, check: NDArray[np.bool_], tolerance: float
+) -> NDArray[np.bool_]:
+    """(T,) frames of ``check`` where ``path`` is closer than ``-tolerance`` to its margins and than the
+    raw solution's clearance minus ``tolerance`` [m]."""
+    bad = np.zeros(path.shape[0], dtype=bool)
+    for i in np.flatnonzero(check):
+        if np.allclose(raw[i], path[i], atol=1e-6):
+            continue
+        c = solver.clearance(path[i])
+        bad[i] = c < -tolerance and c < solver.clearance(raw[i]) - tolerance
+    return bad
+
+
+def _window(t: F64, bad: NDArray[np.bool_], window_s: float) -> F64:
+    """(T,) weight: 1 on the ``bad`` frames, easing to 0 over ``window_s`` [s] either side."""
+    weight = np.zeros(t.shape[0])
+    for i in np.flatnonzero(bad):
+        near = np.abs(t - t[i]) < window_s
+        weight[near] = np.maximum(weight[near], _ease(2.0 * (1.0 - np.abs(t[near] - t[i]) / window_s)))
+    return weight
+
+
+def keep_clearance(
+    solver: IKSolver,
+    robot: RobotModel,
+    t: F64,
+    raw: F64,
+    cutoff_hz: float,
+    *,
+    tolerance: float = 0.001,
+    window_s: float = 0.3,
+) -> tuple[F64, int]:
+    """The IK's solutions ``raw`` (T, nq) at ``t`` (T,) [s] smoothed at ``cutoff_hz`` [Hz]
+    (:func:`smooth_joints`), except around the frames where that costs clearance (below both ``-tolerance``
+    [m] and the raw clearance minus ``tolerance``): there the path blends (over ``window_s`` [s]) into
+    the raw path smoothed at twice, then four times the cut-off, and finally into the raw path. Returns
+    the path and the number of frames that needed the raw path or a higher cut-off."""
+    path = smooth_joints(robot, t, raw, cutoff_hz)
+    if t.shape[0] == 0 or np.array_equal(path, raw):
+        return path, 0
+    check = np.ones(t.shape[0], dtype=bool)
+    fixed = np.zeros(t.shape[0], dtype=bool)
+    for candidate in (2.0 * cutoff_hz, 4.0 * cutoff_hz, 0.0):
+        bad = _bad_frames(solver, raw, path, check, tolerance)
+        if not bad.any():
+            break
+        fixed |= bad
+        weight = _window(t, bad, window_s)
+        target = smooth_joints(robot, t, raw, candidate) if candidate > 0.0 else raw
+        path = path + weight[:, None] * (target - path)
+        check = weight > 0.0
+    return np.asarray(path), int(fixed.sum())
