@@ -122,7 +122,7 @@ def test_browser_click_pick_place(app: UiApp, tmp_path: Path) -> None:
         _wait(lambda: SUCCESS_TEXT in page.inner_text("body"), 60.0, page)
         assert app.wait(60.0)  # the min-jerk comparison is planned after the task
         assert not app.view.minjerk_handles[0].visible
-        page.get_by_text("Min-jerk comparison").click()
+        page.get_by_text("Min-jerk comparison", exact=True).click()
         _wait(lambda: bool(app.minjerk.value), 10.0, page)
         close = page.locator("button.mantine-Notification-closeButton")
         if close.count():  # the "software WebGL" notice of headless Chromium
