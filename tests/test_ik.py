@@ -9,10 +9,11 @@ import pytest
 import trimesh
 
 from hsi_planning.errors import ConfigError, RetargetError
-from hsi_retarget.collision import SceneDistance, robot_spheres
+from hsi_retarget.collision import robot_spheres
 from hsi_retarget.humanoid_ik import SupportConfig, com_inside, support_polygon
 from hsi_retarget.ik import IKConfig, IKSolver, IKTargets
 from hsi_retarget.robots import RobotModel
+from hsi_retarget.scene_distance import SceneDistance
 
 SIDES = ("left", "right")
 

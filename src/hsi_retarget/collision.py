@@ -8,25 +8,23 @@ to what they grasp), and for the body the links that carry the arms (torso, pelv
 children (head). A capsule/cylinder becomes spheres of its radius along its axis, a box spheres of its
 smallest half extent over its two larger axes (a finger box: spheres of its middle half extent along its
 longest axis; the box of a gripper's palm, which comes close to the other arm, is covered completely,
-corners included, by a grid of spheres bulging at most about 15 mm). Distances to the scene come from an
-Open3D ``RaycastingScene`` of the scene's world-frame meshes (closest point; negative when the point lies
-clearly behind the closest triangle, i.e. inside a closed mesh).
+corners included, by a grid of spheres bulging at most about 15 mm). Distances to the scene come from
+:class:`~hsi_retarget.scene_distance.SceneDistance`.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
-import open3d as o3d
 import pinocchio as pin
-import trimesh
 from numpy.typing import NDArray
 
 from hsi_planning.errors import RetargetError
+from hsi_retarget.culling import LinkBounds
 from hsi_retarget.robots import Geom, RobotModel
+from hsi_retarget.scene_distance import SceneDistance
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
@@ -63,12 +61,10 @@ class SphereSet:
 
     def world(self, data: pin.Data) -> F64:
         """(S, 3) [m] sphere centres in the world; needs ``data.oMf`` up to date."""
-        rot = np.empty((self.radii.shape[0], 3, 3))
-        pos = np.empty((self.radii.shape[0], 3))
-        for fid in np.unique(self.frame_ids):
-            placement = data.oMf[int(fid)]
-            sel = self.frame_ids == fid
-            rot[sel], pos[sel] = placement.rotation, placement.translation
+        unique, inverse = np.unique(self.frame_ids, return_inverse=True)
+        placements = [data.oMf[int(fid)] for fid in unique]
+        rot = np.stack([p.rotation for p in placements])[inverse]
+        pos = np.stack([p.translation for p in placements])[inverse]
         return np.asarray(np.einsum("sij,sj->si", rot, self.centers) + pos)
 
     def pairs(self) -> I64:
@@ -207,55 +203,6 @@ def robot_spheres(robot: RobotModel, max_per_axis: int = 12) -> SphereSet:
     )
 
 
-class SceneDistance:
-    """Signed distance [m] from points to a set of world-frame triangle meshes (Open3D raycasting scene)."""
-
-    def __init__(self, meshes: Mapping[str, trimesh.Trimesh], exclude: Iterable[str] = ()) -> None:
-        """Index ``meshes`` (name -> world-frame mesh) except those named in ``exclude`` or below them
-        (``cabinet1`` also drops ``cabinet1/door1``).
-
-        Raises:
-            RetargetError: nothing left to index.
-        """
-        drop = tuple(exclude)
-        kept = {n: m for n, m in meshes.items() if not any(n == d or n.startswith(d + "/") for d in drop)}
-        if not kept:
-            raise RetargetError(f"no scene mesh left after excluding {list(drop)}")
-        self.names: tuple[str, ...] = tuple(kept)
-        self._scene = o3d.t.geometry.RaycastingScene()
-        for mesh in kept.values():
-            self._scene.add_triangles(
-                o3d.core.Tensor.from_numpy(np.ascontiguousarray(mesh.vertices, dtype=np.float32)),
-                o3d.core.Tensor.from_numpy(np.ascontiguousarray(mesh.faces, dtype=np.uint32)),
-            )
-
-    @classmethod
-    def from_spec(cls, spec: object, exclude: Iterable[str] = ()) -> SceneDistance:
-        """From a scene spec (:func:`hsi_planning.scene.scene_meshes`)."""
-        from hsi_planning.scene import scene_meshes
-
-        return cls(scene_meshes(spec), exclude)  # type: ignore[arg-type]
-
-    def query(self, points: F64) -> tuple[F64, F64]:
-        """Distances (N,) [m] (negative inside a closed mesh) and unit gradients (N, 3) (the direction that
-        increases the distance) of ``points`` (N, 3) [m]."""
-        pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-        if pts.shape[0] == 0:
-            return np.zeros(0), np.zeros((0, 3))
-        ans = self._scene.compute_closest_points(
-            o3d.core.Tensor.from_numpy(np.ascontiguousarray(pts, dtype=np.float32))
-        )
-        closest = ans["points"].numpy().astype(np.float64)
-        tri_normal = ans["primitive_normals"].numpy().astype(np.float64)
-        delta = pts - closest
-        dist = np.linalg.norm(delta, axis=1)
-        # inside: the point lies behind the closest triangle's plane (a point outside next to an edge can get
-        # the other face's triangle, with a slightly negative dot product: not inside)
-        side = np.where(np.einsum("ij,ij->i", delta, tri_normal) < -0.5 * dist, -1.0, 1.0)
-        direction = np.where(dist[:, None] > 1e-9, delta / np.maximum(dist, 1e-12)[:, None], tri_normal)
-        return side * dist, direction * side[:, None]
-
-
 def collision_rows(
     model: pin.Model,
     data: pin.Data,
@@ -267,6 +214,7 @@ def collision_rows(
     activation: float,
     gain: float,
     max_rows: int,
+    bounds: LinkBounds | None = None,
 ) -> tuple[F64, F64, float]:
     """Linearized clearance constraints ``A dq >= lower`` for one IK step.
 
@@ -274,35 +222,24 @@ def collision_rows(
     near the scene and every pair of ``pairs`` (P, 2) closer than ``activation`` [m] beyond its margin
     (``margins`` = scene, finger tip, self [m]) is a candidate; the ``max_rows`` closest get a row
     ``n^T (J_a - J_b) dq >= -gain (d - margin)`` (a velocity damper: one step closes at most ``gain`` of the
-    gap). Returns A (k, nv), lower (k,) and the smallest gap [m] (``inf`` without candidates).
+    gap). ``bounds`` (built from the same spheres and ``pairs``) skips the links that cannot be near (same
+    result, cheaper). Returns A (k, nv), lower (k,) and the smallest gap [m] (``inf`` without candidates).
     """
-    scene_margin, tip_margin, self_margin = margins
-    centers = spheres.world(data)
-    first, second, slacks, directions = [], [], [], []  # sphere pairs (second -1: the scene)
-    if scene is not None:
-        dist, normal = scene.query(centers)
-        slack = dist - spheres.radii - np.where(spheres.tips, tip_margin, scene_margin)
-        near = np.flatnonzero(slack < activation)
-        first.append(near)
-        second.append(np.full(near.shape, -1))
-        slacks.append(slack[near])
-        directions.append(normal[near])
-    if pairs.shape[0]:
-        a, b = pairs[:, 0], pairs[:, 1]
-        delta = centers[a] - centers[b]
-        norm = np.linalg.norm(delta, axis=1)
-        slack = norm - spheres.radii[a] - spheres.radii[b] - self_margin
-        near = np.flatnonzero(slack < activation)
-        first.append(a[near])
-        second.append(b[near])
-        slacks.append(slack[near])
-        directions.append(delta[near] / np.maximum(norm[near], 1e-9)[:, None])
-    gaps = np.concatenate(slacks) if slacks else np.zeros(0)
+    links, centers = bounds.world(data, spheres) if bounds is not None else (None, spheres.world(data))
+    ia, ib, gaps, dirs = _candidates(
+        spheres,
+        centers,
+        pairs,
+        scene,
+        margins=margins,
+        activation=activation,
+        bounds=bounds,
+        links=links,
+    )
     if gaps.size == 0:
         return np.zeros((0, model.nv)), np.zeros(0), math.inf
     order = np.argsort(gaps)[:max_rows]
-    ia, ib = np.concatenate(first)[order], np.concatenate(second)[order]
-    dirs = np.concatenate(directions)[order]
+    ia, ib, dirs = ia[order], ib[order], dirs[order]
     rows = _point_rows(model, data, spheres, centers, idx=ia, dirs=dirs)
     rows -= _point_rows(model, data, spheres, centers, idx=ib, dirs=dirs)
     return rows, -gain * gaps[order], float(gaps[order[0]])
@@ -314,20 +251,76 @@ def min_gap(
     pairs: I64,
     scene: SceneDistance | None,
     margins: tuple[float, float, float],
+    *,
+    activation: float = math.inf,
+    bounds: LinkBounds | None = None,
+    links: F64 | None = None,
 ) -> float:
     """[m] smallest clearance minus its margin over the spheres (world ``centers`` (S, 3)) against the
-    scene and over ``pairs`` (P, 2) (``margins`` = scene, finger tip, self [m]); ``inf`` with neither."""
+    scene and over ``pairs`` (P, 2) (``margins`` = scene, finger tip, self [m]); ``inf`` with neither,
+    or when nothing is within ``activation`` [m] beyond its margin. ``bounds`` (with ``links``, their world
+    centres (F, 3) of the same configuration, :meth:`LinkBounds.world`) culls as in :func:`collision_rows`."""
+    gaps = _candidates(
+        spheres,
+        centers,
+        pairs,
+        scene,
+        margins=margins,
+        activation=activation,
+        bounds=bounds,
+        links=links,
+    )[2]
+    return float(gaps.min(initial=math.inf))
+
+
+def _candidates(
+    spheres: SphereSet,
+    centers: F64,
+    pairs: I64,
+    scene: SceneDistance | None,
+    *,
+    margins: tuple[float, float, float],
+    activation: float,
+    bounds: LinkBounds | None,
+    links: F64 | None,
+) -> tuple[I64, I64, F64, F64]:
+    """Sphere index pairs (second -1: the scene), gaps [m] and unit directions (first away from second)
+    of every candidate closer than ``activation`` beyond its margin."""
     scene_margin, tip_margin, self_margin = margins
-    best = math.inf
+    first, second, slacks, directions = [], [], [], []
     if scene is not None:
-        dist, _ = scene.query(centers)
-        slack = dist - spheres.radii - np.where(spheres.tips, tip_margin, scene_margin)
-        best = min(best, float(slack.min(initial=math.inf)))
+        allowance = spheres.radii + np.where(spheres.tips, tip_margin, scene_margin)
+        check = np.arange(spheres.radii.shape[0])
+        if links is not None and bounds is not None and np.isfinite(activation):
+            reach = activation + min(tip_margin, scene_margin)
+            check = np.flatnonzero(bounds.scene_candidates(scene, links, reach))
+        dist, normal = scene.query_within(centers[check], allowance[check] + activation)
+        slack = dist - allowance[check]
+        near = np.flatnonzero(slack < activation)
+        first.append(check[near])
+        second.append(np.full(near.shape, -1))
+        slacks.append(slack[near])
+        directions.append(normal[near])
+    if links is not None and bounds is not None and np.isfinite(activation):
+        pairs = bounds.near_pairs(links, activation + self_margin)
     if pairs.shape[0]:
         a, b = pairs[:, 0], pairs[:, 1]
-        norm = np.linalg.norm(centers[a] - centers[b], axis=1)
-        best = min(best, float((norm - spheres.radii[a] - spheres.radii[b] - self_margin).min()))
-    return best
+        delta = centers[a] - centers[b]
+        norm = np.linalg.norm(delta, axis=1)
+        slack = norm - spheres.radii[a] - spheres.radii[b] - self_margin
+        near = np.flatnonzero(slack < activation)
+        first.append(a[near])
+        second.append(b[near])
+        slacks.append(slack[near])
+        directions.append(delta[near] / np.maximum(norm[near], 1e-9)[:, None])
+    if not slacks:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 3))
+    return (
+        np.concatenate(first).astype(np.int64),
+        np.concatenate(second).astype(np.int64),
+        np.concatenate(slacks),
+        np.concatenate(directions),
+    )
 
 
 def _point_rows(

@@ -1,4 +1,4 @@
-"""Per-frame differential inverse kinematics as a small dense QP (CasADi ``conic`` with DAQP).
+"""Per-frame differential inverse kinematics as a small dense QP (:mod:`hsi_retarget.qp`, DAQP).
 
 One step solves, for the joint step ``dq`` (tangent space, the gripper fingers excluded)::
 
@@ -19,16 +19,18 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-import casadi as ca
 import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
-from hsi_planning.errors import ConfigError, RetargetError
-from hsi_retarget.collision import SceneDistance, collision_rows, min_gap, robot_spheres
+from hsi_planning.errors import ConfigError
+from hsi_retarget.collision import collision_rows, min_gap, robot_spheres
+from hsi_retarget.culling import LinkBounds
 from hsi_retarget.humanoid_ik import SupportConfig, support_rows
 from hsi_retarget.mapping import BASE_JOINTS, LIFT_JOINT
+from hsi_retarget.qp import solve_qp
 from hsi_retarget.robots import RobotModel
+from hsi_retarget.scene_distance import SceneDistance
 
 F64 = NDArray[np.float64]
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
@@ -155,6 +157,8 @@ class IKSolver:
         }
         self.spheres = robot_spheres(robot)
         self._pairs = self.spheres.pairs()
+        checked = self._pairs if self.config.self_collision else self._pairs[:0]
+        self._bounds = LinkBounds(self.spheres, checked)
         self._v_max = np.array(robot.v_max)
         self._jq = np.array([robot.q_index(n) for n in robot.joint_names], dtype=np.int64)
         self._jv = np.array([robot.v_index(n) for n in robot.joint_names], dtype=np.int64)
@@ -171,10 +175,6 @@ class IKSolver:
             if LIFT_JOINT in robot.joint_names
             else None
         )
-        self._rows_max = self.config.max_collision_rows + (12 + 16 if robot.floating else 0)
-        n = int(self.act.shape[0])
-        sparsity = {"h": ca.Sparsity.dense(n, n), "a": ca.Sparsity.dense(max(self._rows_max, 1), n)}
-        self._qp = ca.conic("ik_qp", "daqp", sparsity, {"error_on_fail": False})
 
     # ------------------------------------------------------------------------------------- tasks
 
@@ -252,6 +252,7 @@ class IKSolver:
             activation=cfg.activation_distance,
             gain=cfg.collision_gain,
             max_rows=cfg.max_collision_rows,
+            bounds=self._bounds,
         )
 
     # ------------------------------------------------------------------------------------ solving
@@ -309,26 +310,19 @@ class IKSolver:
         info = StepInfo(bool(ok), level, n_coll, float(min_slack))
         return robot.integrate(q, dq), info
 
+    @staticmethod
     def _solve_qp(
-        self, hess: F64, grad: F64, rows: F64, *, bounds: tuple[F64, F64, F64, F64], level: int
+        hess: F64, grad: F64, rows: F64, *, bounds: tuple[F64, F64, F64, F64], level: int
     ) -> tuple[F64, bool]:
-        """Solve with rows ``lo <= rows dx <= hi`` and box ``lbx <= dx <= ubx`` (``bounds``)."""
+        """Solve with rows ``lo <= rows dx <= hi`` and box ``lbx <= dx <= ubx`` (``bounds``); at ``level``
+        2 without the rows, the equality rows (feet) kept as stiff tasks."""
         lo, hi, lbx, ubx = bounds
-        m = self._rows_max
-        if rows.shape[0] > m:
-            raise RetargetError(f"IK QP got {rows.shape[0]} constraint rows, more than its {m}")
-        a = np.zeros((max(m, 1), rows.shape[1]))
-        lba, uba = np.full(max(m, 1), -np.inf), np.full(max(m, 1), np.inf)
-        if level < 2:
-            k = rows.shape[0]
-            a[:k], lba[:k], uba[:k] = rows, lo, hi
-        elif np.isfinite(hi).any():  # keep the equality rows (feet) as stiff tasks
+        if level == 2:
             eq = np.isfinite(hi)
             hess = hess + 1e4 * rows[eq].T @ rows[eq]
             grad = grad - 1e4 * rows[eq].T @ hi[eq]
-        res = self._qp(h=hess, g=grad, a=a, lba=lba, uba=uba, lbx=lbx, ubx=ubx)
-        ok = bool(self._qp.stats()["success"])
-        return np.asarray(res["x"], dtype=np.float64).reshape(-1), ok
+            rows, lo, hi = rows[:0], lo[:0], hi[:0]
+        return solve_qp(hess, grad, rows, row_bounds=(lo, hi), box=(lbx, ubx))
 
     def sphere_centers(self, q: F64) -> F64:
         """(S, 3) [m] world centres of :attr:`spheres` at ``q`` (nq,)."""
@@ -341,7 +335,18 @@ class IKSolver:
         cfg = self.config
         pairs = self._pairs if cfg.self_collision else np.zeros((0, 2), dtype=np.int64)
         margins = (cfg.scene_margin, cfg.tip_margin, cfg.self_margin)
-        gap = min_gap(self.spheres, self.sphere_centers(q), pairs, self.scene, margins)
+        pin.framesForwardKinematics(self._model, self._data, np.asarray(q, dtype=np.float64))
+        links, centers = self._bounds.world(self._data, self.spheres)
+        gap = min_gap(
+            self.spheres,
+            centers,
+            pairs,
+            self.scene,
+            margins,
+            activation=cfg.activation_distance,
+            bounds=self._bounds,
+            links=links,
+        )
         return gap if gap < cfg.activation_distance else math.inf
 
     def errors(self, q: F64, targets: IKTargets) -> tuple[dict[str, float], dict[str, float]]:

@@ -26,7 +26,6 @@ from numpy.typing import NDArray
 from hsi_planning.errors import ConfigError, RetargetError
 from hsi_planning.trajectory import WristTrajectory
 from hsi_retarget.carry_correction import correct_carry
-from hsi_retarget.collision import SceneDistance
 from hsi_retarget.grasp_depth import GraspDepthConfig, grasp_windows, shape_grasps
 from hsi_retarget.grip_turn import GripTurnConfig, handle_bar_axes, object_prims, turn_grips
 from hsi_retarget.human_motion import SIDES, HumanMotion
@@ -40,6 +39,7 @@ from hsi_retarget.mapping import (
     nominal_configuration,
 )
 from hsi_retarget.robots import RobotModel
+from hsi_retarget.scene_distance import SceneDistance
 from hsi_retarget.smoothing import keep_clearance, smooth_joints  # noqa: F401 (smooth_joints: API)
 from hsi_retarget.sources import human_motion_from_schedule, human_motion_from_wrists
 from hsi_retarget.timing import TimingConfig, time_parameterize
@@ -62,6 +62,8 @@ class RetargetConfig:
     timing: TimingConfig = field(default_factory=TimingConfig)  #: velocity/acceleration limit use
     support: SupportConfig = field(default_factory=SupportConfig)  #: humanoid feet and stepping
     iterations_per_frame: int = 3  #: [-] IK steps per frame after the first
+    #: [rad] or [m] a frame's IK stops after a step that changed no coordinate more than this (0: never)
+    settle_step: float = 1e-3
     initial_iterations: int = 200  #: [-] IK steps to converge on the first frame
     velocity_factor: float = 3.0  #: [-] per-frame step bound, multiple of v_max x frame period
     smoothing_hz: float = 8.0  #: [Hz] low-pass of a fixed-base robot's arm/base/lift joints; 0: none
@@ -85,6 +87,8 @@ class RetargetConfig:
                 "RetargetConfig.iterations_per_frame and initial_iterations must be >= 1, "
                 "repair_iterations >= 0"
             )
+        if not 0.0 <= self.settle_step < 0.05:
+            raise ConfigError(f"RetargetConfig.settle_step must be in [0, 0.05), got {self.settle_step}")
         if not 0.0 <= self.repair_depth < 0.1:
             raise ConfigError(f"RetargetConfig.repair_depth must be in [0, 0.1) m, got {self.repair_depth}")
         if not self.smoothing_hz >= 0.0:
@@ -198,9 +202,12 @@ def track(
             dt = float(goals.t[i] - goals.t[i - 1]) * cfg.velocity_factor
             q_start = q
             for _ in range(cfg.iterations_per_frame):
+                q_prev = q
                 q, info = solver.step(q, targets, dt, q_start)
                 fallbacks += int(info.fallback > 0)
                 min_clear = min(min_clear, info.min_clearance)
+                if float(np.max(np.abs(q - q_prev))) < cfg.settle_step:  # settled: more steps change ~nothing
+                    break
                 pe, oe = solver.errors(q, targets)
                 if all(pe[s] <= tol_p and oe[s] <= tol_o for s in pe):
                     break

@@ -1,0 +1,105 @@
+"""Signed distance from points to the scene: an Open3D ``RaycastingScene`` of the scene's world-frame
+meshes (closest point; negative when the point lies clearly behind the closest triangle, i.e. inside a
+closed mesh), with a cheap lower bound from a coarse grid filled on demand, so that points far from
+everything are not queried exactly (:meth:`SceneDistance.query_within`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+
+import numpy as np
+import open3d as o3d
+import trimesh
+from numpy.typing import NDArray
+
+from hsi_planning.errors import RetargetError
+
+F64 = NDArray[np.float64]
+_BOUND_CELL = 0.05  #: [m] node spacing of :meth:`SceneDistance.lower_bound`'s grid
+_BOUND_PAD = 0.5  #: [m] that grid's extent beyond the meshes' bounding box
+
+
+class SceneDistance:
+    """Signed distance [m] from points to a set of world-frame triangle meshes (Open3D raycasting scene)."""
+
+    def __init__(self, meshes: Mapping[str, trimesh.Trimesh], exclude: Iterable[str] = ()) -> None:
+        """Index ``meshes`` (name -> world-frame mesh) except those named in ``exclude`` or below them
+        (``cabinet1`` also drops ``cabinet1/door1``).
+
+        Raises:
+            RetargetError: nothing left to index.
+        """
+        drop = tuple(exclude)
+        kept = {n: m for n, m in meshes.items() if not any(n == d or n.startswith(d + "/") for d in drop)}
+        if not kept:
+            raise RetargetError(f"no scene mesh left after excluding {list(drop)}")
+        self.names: tuple[str, ...] = tuple(kept)
+        self._scene = o3d.t.geometry.RaycastingScene()
+        for mesh in kept.values():
+            self._scene.add_triangles(
+                o3d.core.Tensor.from_numpy(np.ascontiguousarray(mesh.vertices, dtype=np.float32)),
+                o3d.core.Tensor.from_numpy(np.ascontiguousarray(mesh.faces, dtype=np.uint32)),
+            )
+        verts = np.concatenate([np.asarray(m.vertices, dtype=np.float64) for m in kept.values()])
+        lo = verts.min(axis=0) - _BOUND_PAD
+        shape = np.ceil((verts.max(axis=0) + _BOUND_PAD - lo) / _BOUND_CELL).astype(np.int64) + 1
+        self._grid_origin, self._grid = lo, np.full(tuple(shape), np.nan)  # signed distance at the nodes
+
+    @classmethod
+    def from_spec(cls, spec: object, exclude: Iterable[str] = ()) -> SceneDistance:
+        """From a scene spec (:func:`hsi_planning.scene.scene_meshes`)."""
+        from hsi_planning.scene import scene_meshes
+
+        return cls(scene_meshes(spec), exclude)  # type: ignore[arg-type]
+
+    def lower_bound(self, points: F64) -> F64:
+        """(N,) [m] lower bounds of the distances of ``points`` (N, 3) [m]: the distance is 1-Lipschitz, so
+        it is at least its value at the nearest node of a coarse grid (filled on demand) minus the way there.
+        Points off that grid (more than its padding beyond the meshes) get ``-inf``."""
+        pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        idx = np.rint((pts - self._grid_origin) / _BOUND_CELL).astype(np.int64)
+        inside = np.all((idx >= 0) & (idx < np.asarray(self._grid.shape)), axis=1)
+        bound = np.full(pts.shape[0], -np.inf)
+        if inside.any():
+            cells = idx[inside]
+            nodes = self._grid_origin + cells * _BOUND_CELL
+            values = self._grid[cells[:, 0], cells[:, 1], cells[:, 2]]
+            todo = np.isnan(values)
+            if todo.any():
+                values[todo] = self._exact(nodes[todo])[0]
+                self._grid[cells[todo, 0], cells[todo, 1], cells[todo, 2]] = values[todo]
+            bound[inside] = values - np.linalg.norm(pts[inside] - nodes, axis=1)
+        return bound
+
+    def query_within(self, points: F64, reach: F64) -> tuple[F64, F64]:
+        """:meth:`query` for the ``points`` (N, 3) [m] that may be closer than their ``reach`` (N,) [m]
+        (:meth:`lower_bound`); the others get their lower bound (>= ``reach``) and a zero gradient."""
+        pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        dist = self.lower_bound(pts)
+        grad = np.zeros((pts.shape[0], 3))
+        near = dist < np.asarray(reach, dtype=np.float64)
+        if near.any():
+            dist[near], grad[near] = self._exact(pts[near])
+        return dist, grad
+
+    def query(self, points: F64) -> tuple[F64, F64]:
+        """Distances (N,) [m] (negative inside a closed mesh) and unit gradients (N, 3) (the direction that
+        increases the distance) of ``points`` (N, 3) [m]."""
+        return self._exact(np.asarray(points, dtype=np.float64).reshape(-1, 3))
+
+    def _exact(self, pts: F64) -> tuple[F64, F64]:
+        if pts.shape[0] == 0:
+            return np.zeros(0), np.zeros((0, 3))
+        ans = self._scene.compute_closest_points(
+            o3d.core.Tensor.from_numpy(np.ascontiguousarray(pts, dtype=np.float32))
+        )
+        closest = ans["points"].numpy().astype(np.float64)
+        tri_normal = ans["primitive_normals"].numpy().astype(np.float64)
+        delta = pts - closest
+        dist = np.linalg.norm(delta, axis=1)
+        # inside: the point lies behind the closest triangle's plane (a point outside next to an edge can get
+        # the other face's triangle, with a slightly negative dot product: not inside)
+        side = np.where(np.einsum("ij,ij->i", delta, tri_normal) < -0.5 * dist, -1.0, 1.0)
+        direction = np.where(dist[:, None] > 1e-9, delta / np.maximum(dist, 1e-12)[:, None], tri_normal)
+        return side * dist, direction * side[:, None]
