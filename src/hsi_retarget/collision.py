@@ -29,6 +29,9 @@ from hsi_retarget.scene_distance import SceneDistance
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
 GROUPS = ("left", "right", "body")  #: sphere groups (index = group code)
+_BODY = GROUPS.index("body")
+EDGE_RADIUS = 0.05  #: [m] spheres along the edges of a big body box (:func:`_edge_columns`)
+EDGE_MIN_HALF = 0.1  #: [m] smallest half extent of a body box that gets edge columns
 
 
 @dataclass(frozen=True, eq=False)
@@ -93,6 +96,29 @@ def _covering_grid(pose: F64, half_ext: F64, max_per_axis: int) -> list[tuple[F6
         for v in grids[1]
         for w in grids[2]
     ]
+
+
+def _edge_columns(pose: F64, half_ext: F64) -> list[tuple[F64, float]]:
+    """Columns of :data:`EDGE_RADIUS` spheres along the four edges parallel to the smallest axis of a big
+    box (smallest half extent >= :data:`EDGE_MIN_HALF`; e.g. a mobile base's chassis), whose spheres of the
+    smallest half extent leave its corners open. Each touches its edge and bulges ~15 mm out of the faces."""
+    thin = int(np.argmin(half_ext))
+    if half_ext[thin] < EDGE_MIN_HALF:
+        return []
+    inset = EDGE_RADIUS / math.sqrt(2.0)  # the edge lies on the sphere
+    axes = [a for a in range(3) if a != thin]
+    span = float(half_ext[thin]) - 0.5 * EDGE_RADIUS
+    heights = np.linspace(-span, span, max(2, math.ceil(2.0 * span / EDGE_RADIUS) + 1))
+    out = []
+    for su in (-1.0, 1.0):
+        for sv in (-1.0, 1.0):
+            for h in heights:
+                local = np.zeros(3)
+                local[axes[0]] = su * (half_ext[axes[0]] - inset)
+                local[axes[1]] = sv * (half_ext[axes[1]] - inset)
+                local[thin] = h
+                out.append((pose[:3, :3] @ local + pose[:3, 3], EDGE_RADIUS))
+    return out
 
 
 def _geom_spheres(
@@ -180,7 +206,10 @@ def robot_spheres(robot: RobotModel, max_per_axis: int = 12) -> SphereSet:
     for name, group in selected:
         finger = name in finger_links
         for geom in links[name].geoms:
-            for centre, radius in _geom_spheres(geom, max_per_axis, finger, name in palms):
+            found = _geom_spheres(geom, max_per_axis, finger, name in palms)
+            if group == "body" and geom.kind == "box":
+                found += _edge_columns(np.asarray(geom.pose), np.asarray(geom.size, dtype=np.float64))
+            for centre, radius in found:
                 tips.append(finger)
                 proximal.append(name in upper)
                 fixed.append(name in upper and not links[name].joints)
@@ -294,7 +323,8 @@ def _candidates(
         if links is not None and bounds is not None and np.isfinite(activation):
             reach = activation + min(tip_margin, scene_margin)
             check = np.flatnonzero(bounds.scene_candidates(scene, links, reach))
-        dist, normal = scene.query_within(centers[check], allowance[check] + activation)
+        grounded = spheres.groups[check] != _BODY  # the base stands on the floor: body spheres ignore it
+        dist, normal = scene.query_within(centers[check], allowance[check] + activation, grounded)
         slack = dist - allowance[check]
         near = np.flatnonzero(slack < activation)
         first.append(check[near])

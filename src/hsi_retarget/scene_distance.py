@@ -23,9 +23,15 @@ _BOUND_PAD = 0.5  #: [m] that grid's extent beyond the meshes' bounding box
 class SceneDistance:
     """Signed distance [m] from points to a set of world-frame triangle meshes (Open3D raycasting scene)."""
 
-    def __init__(self, meshes: Mapping[str, trimesh.Trimesh], exclude: Iterable[str] = ()) -> None:
+    def __init__(
+        self,
+        meshes: Mapping[str, trimesh.Trimesh],
+        exclude: Iterable[str] = (),
+        ground: Iterable[str] = ("floor",),
+    ) -> None:
         """Index ``meshes`` (name -> world-frame mesh) except those named in ``exclude`` or below them
-        (``cabinet1`` also drops ``cabinet1/door1``).
+        (``cabinet1`` also drops ``cabinet1/door1``). The meshes named in ``ground`` can be left out per
+        query (:meth:`query_within`: a robot's base stands on the floor).
 
         Raises:
             RetargetError: nothing left to index.
@@ -35,12 +41,9 @@ class SceneDistance:
         if not kept:
             raise RetargetError(f"no scene mesh left after excluding {list(drop)}")
         self.names: tuple[str, ...] = tuple(kept)
-        self._scene = o3d.t.geometry.RaycastingScene()
-        for mesh in kept.values():
-            self._scene.add_triangles(
-                o3d.core.Tensor.from_numpy(np.ascontiguousarray(mesh.vertices, dtype=np.float32)),
-                o3d.core.Tensor.from_numpy(np.ascontiguousarray(mesh.faces, dtype=np.uint32)),
-            )
+        self._scene = _raycasting(kept.values())
+        lifted = [m for n, m in kept.items() if n not in set(ground)]
+        self._lifted = _raycasting(lifted) if lifted and len(lifted) < len(kept) else None
         verts = np.concatenate([np.asarray(m.vertices, dtype=np.float64) for m in kept.values()])
         lo = verts.min(axis=0) - _BOUND_PAD
         shape = np.ceil((verts.max(axis=0) + _BOUND_PAD - lo) / _BOUND_CELL).astype(np.int64) + 1
@@ -72,13 +75,21 @@ class SceneDistance:
             bound[inside] = values - np.linalg.norm(pts[inside] - nodes, axis=1)
         return bound
 
-    def query_within(self, points: F64, reach: F64) -> tuple[F64, F64]:
+    def query_within(
+        self, points: F64, reach: F64, grounded: NDArray[np.bool_] | None = None
+    ) -> tuple[F64, F64]:
         """:meth:`query` for the ``points`` (N, 3) [m] that may be closer than their ``reach`` (N,) [m]
-        (:meth:`lower_bound`); the others get their lower bound (>= ``reach``) and a zero gradient."""
+        (:meth:`lower_bound`); the others get their lower bound (>= ``reach``) and a zero gradient. Points
+        where ``grounded`` (N,) is False are measured without the ground meshes (default: all with)."""
         pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-        dist = self.lower_bound(pts)
+        dist = self.lower_bound(pts)  # without a mesh the distance only grows: still a lower bound
         grad = np.zeros((pts.shape[0], 3))
         near = dist < np.asarray(reach, dtype=np.float64)
+        if grounded is not None and self._lifted is not None:
+            raised = near & ~np.asarray(grounded, dtype=bool)
+            near &= np.asarray(grounded, dtype=bool)
+            if raised.any():
+                dist[raised], grad[raised] = self._exact(pts[raised], self._lifted)
         if near.any():
             dist[near], grad[near] = self._exact(pts[near])
         return dist, grad
@@ -88,10 +99,10 @@ class SceneDistance:
         increases the distance) of ``points`` (N, 3) [m]."""
         return self._exact(np.asarray(points, dtype=np.float64).reshape(-1, 3))
 
-    def _exact(self, pts: F64) -> tuple[F64, F64]:
+    def _exact(self, pts: F64, scene: o3d.t.geometry.RaycastingScene | None = None) -> tuple[F64, F64]:
         if pts.shape[0] == 0:
             return np.zeros(0), np.zeros((0, 3))
-        ans = self._scene.compute_closest_points(
+        ans = (self._scene if scene is None else scene).compute_closest_points(
             o3d.core.Tensor.from_numpy(np.ascontiguousarray(pts, dtype=np.float32))
         )
         closest = ans["points"].numpy().astype(np.float64)
@@ -103,3 +114,13 @@ class SceneDistance:
         side = np.where(np.einsum("ij,ij->i", delta, tri_normal) < -0.5 * dist, -1.0, 1.0)
         direction = np.where(dist[:, None] > 1e-9, delta / np.maximum(dist, 1e-12)[:, None], tri_normal)
         return side * dist, direction * side[:, None]
+
+
+def _raycasting(meshes: Iterable[trimesh.Trimesh]) -> o3d.t.geometry.RaycastingScene:
+    scene = o3d.t.geometry.RaycastingScene()
+    for mesh in meshes:
+        scene.add_triangles(
+            o3d.core.Tensor.from_numpy(np.ascontiguousarray(mesh.vertices, dtype=np.float32)),
+            o3d.core.Tensor.from_numpy(np.ascontiguousarray(mesh.faces, dtype=np.uint32)),
+        )
+    return scene
