@@ -1,5 +1,7 @@
-"""Collision culling (:mod:`hsi_retarget.culling`): the scene distance's lower bound never exceeds the exact
-distance, and culled IK constraint rows and clearances equal the unculled ones on the kitchen scene."""
+"""Collision geometry of the IK: culling (:mod:`hsi_retarget.culling`; the scene distance's lower bound never
+exceeds the exact distance, culled constraint rows and clearances equal the unculled ones on the kitchen
+scene), the chassis' edge columns and floor exemption, and the opened part as an obstacle
+(:mod:`hsi_retarget.part_scene`)."""
 
 from __future__ import annotations
 
@@ -9,6 +11,8 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from hsi_planning.errors import RetargetError
+from hsi_planning.scene import scene_meshes
 from hsi_planning.scene_paths import load_scene
 from hsi_retarget.collision import collision_rows, min_gap
 from hsi_retarget.culling import LinkBounds
@@ -81,3 +85,78 @@ def test_culled_rows_and_clearance_equal_the_full_check(name: str, kitchen: Scen
         else:
             assert math.isinf(fast)
     assert compared >= 10
+
+
+def test_body_box_corners_are_covered_and_the_floor_is_no_body_obstacle() -> None:
+    import trimesh
+
+    robot = RobotModel("dual_ur5e")
+    spheres = IKSolver(robot).spheres
+    base = robot.description.links[1]
+    assert base.name == "base_link"
+    own = [i for i, f in enumerate(spheres.frames) if f == base.name]
+    for geom in base.geoms:
+        half = np.asarray(geom.size)
+        signs = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T
+        corners = (np.asarray(geom.pose)[:3, :3] @ (signs * half).T).T + np.asarray(geom.pose)[:3, 3]
+        gap = np.linalg.norm(corners[:, None] - spheres.centers[own][None], axis=2) - spheres.radii[own]
+        if half.min() >= 0.1:  # the chassis: every corner within 6 mm of a sphere (scene margin: 20 mm)
+            assert np.all(gap.min(axis=1) <= 0.006), gap.min(axis=1)
+    floor = trimesh.creation.box(extents=(10.0, 10.0, 0.02))
+    floor.apply_translation([0.0, 0.0, -0.01])
+    wall = trimesh.creation.box(extents=(0.1, 2.0, 1.0))
+    wall.apply_translation([0.4, 0.0, 0.5])  # 5 cm in front of the chassis' front face (x = 0.3 m)
+    scene = SceneDistance({"floor": floor, "wall": wall})
+    config = IKConfig()
+    data = robot.model.createData()
+    pin.computeJointJacobians(robot.model, data, robot.q_home)
+    pin.updateFramePlacements(robot.model, data)
+    margins = (config.scene_margin, config.tip_margin, config.self_margin)
+    kwargs = dict(margins=margins, activation=config.activation_distance, gain=0.5, max_rows=1000)
+    rows, lower, _ = collision_rows(robot.model, data, spheres, spheres.pairs()[:0], scene, **kwargs)  # type: ignore[arg-type]
+    base_x = robot.v_index("base_x_joint")
+    assert rows.shape[0] > 0
+    # every row is against the wall: the chassis may not drive forward into it, and no row is a floor row
+    # (those would have no base or arm motion that helps: a zero row)
+    assert np.all(np.abs(rows).sum(axis=1) > 1e-6)
+    assert np.any(rows[:, base_x] < -0.5)
+    assert np.all(lower > -0.5 * config.activation_distance)
+
+
+def test_an_opened_drawer_is_an_obstacle_while_it_stands_open_except_for_its_holder() -> None:
+    from types import SimpleNamespace
+
+    from hsi_retarget.part_scene import opened_part
+
+    spec = load_scene("kitchen")
+    part = "drawer_unit1/drawer1"
+
+    def key(t: float, hand: str, action: str, obj: str = "") -> SimpleNamespace:
+        return SimpleNamespace(time=t, hand=hand, action=action, object_name=obj)
+
+    keys = [key(0.0, "right", "idle"), key(1.0, "right", "reach", part), key(1.5, "right", "open", part)]
+    keys += [
+        key(2.0, "right", "open", part),
+        key(2.5, "right", "hold", part),
+        key(3.0, "left", "grasp", "mug1"),
+    ]
+    keys += [key(4.0, "right", "close", part), key(5.0, "right", "idle")]
+    schedule = SimpleNamespace(info={"part": part, "door_hand": "right"}, keyframes=keys)
+    phase = opened_part(schedule, spec, exclude=("mug1",))  # type: ignore[arg-type]
+    assert phase is not None
+    assert (phase.t_open, phase.t_close, phase.t_free, phase.holder) == (2.0, 4.0, 5.0, "right")
+    assert phase.at(1.0)[0] is None and phase.at(4.5)[0] is None
+    assert phase.at(3.0) == (phase.scene, "right")
+    # the opened drawer's front stands ~0.23 m (0.9 of its travel) in front of the closed one
+    meshes = scene_meshes(spec)
+    centre = np.asarray(meshes[part].bounds).mean(axis=0)
+    moved = np.asarray(phase.scene.query(centre[None])[0])
+    assert moved[0] > 0.01  # the closed drawer's centre is outside the opened drawer
+    robot = RobotModel("dual_ur5e")
+    solver = IKSolver(robot, IKConfig(), SceneDistance.from_spec(spec, exclude=[part]))
+    solver.set_part_scene(phase.scene, "right")
+    assert solver._layer is not None and not solver._layer[1][solver.spheres.of("right")].any()
+    assert solver._layer[1][solver.spheres.of("left")].all()
+    with pytest.raises(RetargetError, match="holder"):
+        solver.set_part_scene(phase.scene, "middle")
+    assert opened_part(SimpleNamespace(info={}, keyframes=keys), spec) is None  # type: ignore[arg-type]

@@ -30,6 +30,8 @@ F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
 GROUPS = ("left", "right", "body")  #: sphere groups (index = group code)
 _BODY = GROUPS.index("body")
+#: One more scene for some spheres: (distance query, (S,) True for the spheres that heed it).
+SceneLayer = tuple[SceneDistance, NDArray[np.bool_]]
 EDGE_RADIUS = 0.05  #: [m] spheres along the edges of a big body box (:func:`_edge_columns`)
 EDGE_MIN_HALF = 0.1  #: [m] smallest half extent of a body box that gets edge columns
 
@@ -101,7 +103,8 @@ def _covering_grid(pose: F64, half_ext: F64, max_per_axis: int) -> list[tuple[F6
 def _edge_columns(pose: F64, half_ext: F64) -> list[tuple[F64, float]]:
     """Columns of :data:`EDGE_RADIUS` spheres along the four edges parallel to the smallest axis of a big
     box (smallest half extent >= :data:`EDGE_MIN_HALF`; e.g. a mobile base's chassis), whose spheres of the
-    smallest half extent leave its corners open. Each touches its edge and bulges ~15 mm out of the faces."""
+    smallest half extent leave its corners open. The edges lie on them (they bulge 15 mm out of the faces);
+    the 8 corners stay within 6 mm of them, well inside the scene margin."""
     thin = int(np.argmin(half_ext))
     if half_ext[thin] < EDGE_MIN_HALF:
         return []
@@ -244,6 +247,7 @@ def collision_rows(
     gain: float,
     max_rows: int,
     bounds: LinkBounds | None = None,
+    extra: SceneLayer | None = None,
 ) -> tuple[F64, F64, float]:
     """Linearized clearance constraints ``A dq >= lower`` for one IK step.
 
@@ -252,7 +256,9 @@ def collision_rows(
     (``margins`` = scene, finger tip, self [m]) is a candidate; the ``max_rows`` closest get a row
     ``n^T (J_a - J_b) dq >= -gain (d - margin)`` (a velocity damper: one step closes at most ``gain`` of the
     gap). ``bounds`` (built from the same spheres and ``pairs``) skips the links that cannot be near (same
-    result, cheaper). Returns A (k, nv), lower (k,) and the smallest gap [m] (``inf`` without candidates).
+    result, cheaper). ``extra`` = (scene, spheres (S,) that heed it): one more scene, e.g. an opened door
+    that one hand holds. Returns A (k, nv), lower (k,) and the smallest gap [m] (``inf`` without
+    candidates).
     """
     links, centers = bounds.world(data, spheres) if bounds is not None else (None, spheres.world(data))
     ia, ib, gaps, dirs = _candidates(
@@ -284,6 +290,7 @@ def min_gap(
     activation: float = math.inf,
     bounds: LinkBounds | None = None,
     links: F64 | None = None,
+    extra: SceneLayer | None = None,
 ) -> float:
     """[m] smallest clearance minus its margin over the spheres (world ``centers`` (S, 3)) against the
     scene and over ``pairs`` (P, 2) (``margins`` = scene, finger tip, self [m]); ``inf`` with neither,
@@ -298,6 +305,7 @@ def min_gap(
         activation=activation,
         bounds=bounds,
         links=links,
+        extra=extra,
     )[2]
     return float(gaps.min(initial=math.inf))
 
@@ -312,19 +320,22 @@ def _candidates(
     activation: float,
     bounds: LinkBounds | None,
     links: F64 | None,
+    extra: SceneLayer | None = None,
 ) -> tuple[I64, I64, F64, F64]:
     """Sphere index pairs (second -1: the scene), gaps [m] and unit directions (first away from second)
-    of every candidate closer than ``activation`` beyond its margin."""
+    of every candidate closer than ``activation`` beyond its margin (the scene, then ``extra``)."""
     scene_margin, tip_margin, self_margin = margins
     first, second, slacks, directions = [], [], [], []
-    if scene is not None:
-        allowance = spheres.radii + np.where(spheres.tips, tip_margin, scene_margin)
-        check = np.arange(spheres.radii.shape[0])
+    layers = [] if scene is None else [(scene, np.ones(spheres.radii.shape[0], dtype=bool))]
+    layers += [] if extra is None else [extra]
+    allowance = spheres.radii + np.where(spheres.tips, tip_margin, scene_margin)
+    for layer, mask in layers:
+        check = np.flatnonzero(mask)
         if links is not None and bounds is not None and np.isfinite(activation):
             reach = activation + min(tip_margin, scene_margin)
-            check = np.flatnonzero(bounds.scene_candidates(scene, links, reach))
+            check = np.flatnonzero(mask & bounds.scene_candidates(layer, links, reach))
         grounded = spheres.groups[check] != _BODY  # the base stands on the floor: body spheres ignore it
-        dist, normal = scene.query_within(centers[check], allowance[check] + activation, grounded)
+        dist, normal = layer.query_within(centers[check], allowance[check] + activation, grounded)
         slack = dist - allowance[check]
         near = np.flatnonzero(slack < activation)
         first.append(check[near])

@@ -23,8 +23,8 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
-from hsi_planning.errors import ConfigError
-from hsi_retarget.collision import collision_rows, min_gap, robot_spheres
+from hsi_planning.errors import ConfigError, RetargetError
+from hsi_retarget.collision import GROUPS, SceneLayer, collision_rows, min_gap, robot_spheres
 from hsi_retarget.culling import LinkBounds
 from hsi_retarget.humanoid_ik import SupportConfig, support_rows
 from hsi_retarget.mapping import BASE_JOINTS, LIFT_JOINT
@@ -159,6 +159,7 @@ class IKSolver:
         self._pairs = self.spheres.pairs()
         checked = self._pairs if self.config.self_collision else self._pairs[:0]
         self._bounds = LinkBounds(self.spheres, checked)
+        self._layer: SceneLayer | None = None
         self._v_max = np.array(robot.v_max)
         self._jq = np.array([robot.q_index(n) for n in robot.joint_names], dtype=np.int64)
         self._jv = np.array([robot.v_index(n) for n in robot.joint_names], dtype=np.int64)
@@ -239,6 +240,20 @@ class IKSolver:
 
     # -------------------------------------------------------------------------------- collisions
 
+    def set_part_scene(self, scene: SceneDistance | None, holder: str = "") -> None:
+        """Check the robot against one more ``scene`` (e.g. an opened door or drawer) from now on, except
+        the spheres of the ``holder`` side (the hand holding it, ``left``/``right``; '' none); ``None``
+        removes it."""
+        if scene is None:
+            self._layer = None
+            return
+        if holder not in ("", "left", "right"):
+            raise RetargetError(f"set_part_scene: holder must be 'left', 'right' or '', got {holder!r}")
+        heed = np.ones(self.spheres.radii.shape[0], dtype=bool)
+        if holder:
+            heed &= self.spheres.groups != GROUPS.index(holder)
+        self._layer = (scene, heed)
+
     def _collision_rows(self, q: F64) -> tuple[F64, F64, float]:
         """Rows A (k, nv) and lower bounds (k,) of the closest sphere pairs; smallest clearance - margin."""
         cfg = self.config
@@ -253,6 +268,7 @@ class IKSolver:
             gain=cfg.collision_gain,
             max_rows=cfg.max_collision_rows,
             bounds=self._bounds,
+            extra=self._layer,
         )
 
     # ------------------------------------------------------------------------------------ solving
@@ -346,6 +362,7 @@ class IKSolver:
             activation=cfg.activation_distance,
             bounds=self._bounds,
             links=links,
+            extra=self._layer,
         )
         return gap if gap < cfg.activation_distance else math.inf
 

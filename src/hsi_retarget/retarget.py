@@ -38,6 +38,7 @@ from hsi_retarget.mapping import (
     map_to_robot,
     nominal_configuration,
 )
+from hsi_retarget.part_scene import PartPhase, opened_part
 from hsi_retarget.robots import RobotModel
 from hsi_retarget.scene_distance import SceneDistance
 from hsi_retarget.smoothing import keep_clearance, smooth_joints  # noqa: F401 (smooth_joints: API)
@@ -141,6 +142,14 @@ def _scene(scene: Any, motion: HumanMotion, source: Any) -> SceneDistance | None
     return SceneDistance.from_spec(scene, exclude=sorted(touched))
 
 
+def _part_phase(source: Any, scene: Any, motion: HumanMotion) -> PartPhase | None:
+    """The opened part of a schedule in a scene spec (:func:`~hsi_retarget.part_scene.opened_part`)."""
+    if not (hasattr(source, "keyframes") and hasattr(scene, "furniture") and hasattr(scene, "objects")):
+        return None
+    targets = tuple(sorted({e.object_name for e in motion.events if e.object_name}))
+    return opened_part(cast("Schedule", source), scene, exclude=targets)
+
+
 def _runs(mask: NDArray[np.bool_], t: F64, values: F64, side: str) -> list[dict[str, Any]]:
     padded = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
     out = []
@@ -164,10 +173,12 @@ def track(
     *,
     start: int = 0,
     before: F64 | None = None,
+    part: PartPhase | None = None,
 ) -> tuple[F64, dict[str, F64], dict[str, F64], dict[str, Any]]:
     """Frame-by-frame IK of ``goals``: configurations (T, nq), TCP position [m] and orientation [rad] errors
     per side (T,) (NaN where inactive) and diagnostics (fallbacks, clearance, footsteps). With ``start`` > 0
-    the frames before it are those of ``before`` (T, nq) and the IK goes on from its frame ``start - 1``."""
+    the frames before it are those of ``before`` (T, nq) and the IK goes on from its frame ``start - 1``.
+    ``part``: an opened door or drawer kept clear of while it stands open (:mod:`hsi_retarget.part_scene`)."""
     n = goals.t.shape[0]
     feet = plan_footsteps(robot, goals.t, goals.root, cfg.support) if robot.floating else None
     q = nominal_configuration(robot, goals.root[0], float(goals.lift[0]))
@@ -179,7 +190,12 @@ def track(
     ori_err = {s: np.full(n, np.nan) for s in goals.tcp}
     fallbacks, min_clear = 0, np.inf
     tol_p, tol_o = solver.config.position_tolerance, solver.config.orientation_tolerance
+    layer: tuple[SceneDistance | None, str] = (None, "")
     for i in range(start if before is not None else 0, n):
+        now = (None, "") if part is None else part.at(float(goals.t[i]))
+        if now[0] is not layer[0] or now[1] != layer[1]:
+            layer = now
+            solver.set_part_scene(*layer)
         lift = float(goals.lift[i])
         root = goals.root[i]
         if feet is not None and np.isfinite(feet.com[i]).all():  # stepping: pelvis over the stance foot
@@ -220,6 +236,7 @@ def track(
         pe, oe = solver.errors(q, targets)
         for s in pe:
             pos_err[s][i], ori_err[s][i] = pe[s], oe[s]
+    solver.set_part_scene(None)
     diag: dict[str, Any] = {"qp_fallbacks": fallbacks, "min_collision_slack_m": float(min_clear)}
     if feet is not None:
         diag["footsteps"] = feet.steps
@@ -272,12 +289,13 @@ def retarget(
     goals = map_to_robot(motion, model, mapping)
     t_map = time.perf_counter() - t0
     solver = IKSolver(model, cfg.ik, _scene(scene, motion, source), cfg.support)
+    part = _part_phase(source, scene, motion)
     t1 = time.perf_counter()
-    qs, _, _, diag = track(goals, model, solver, cfg)
+    qs, _, _, diag = track(goals, model, solver, cfg, part=part)
     if cfg.correct_carry and motion.events:  # re-aim the carries from the reached grasp poses
         goals, diag["carry_corrections"], first = correct_carry(goals, qs, model, motion.events)
         if first is not None:
-            qs, _, _, again = track(goals, model, solver, cfg, start=first + 1, before=qs)
+            qs, _, _, again = track(goals, model, solver, cfg, start=first + 1, before=qs, part=part)
             diag["qp_fallbacks"] += again["qp_fallbacks"]
     qs, diag["smoothing_restored_frames"] = keep_clearance(solver, model, goals.t, qs, cfg.smoothing_hz)
     pos_err, ori_err = tcp_errors(model, goals, qs)
