@@ -7,9 +7,11 @@ narrow-shelf pick with a blocker, and the cluttered-drawer pick. Layouts come fr
 (:func:`hsi_planning.scene.generate_layouts`, seeds ≥ 100000 never used in training) with the template's
 object as the kept, reachable target, without and with reshaped containers. The place click is drawn on
 the template's support surface of the layout: 10–18 cm behind its front edge (where the demo's clicks are),
-clear of the objects resting on it and at least 20 cm from where the picked object starts. The object is
-named (as the demo's hidden objects are), not clicked: the benchmark measures planning and execution, not
-click resolution.
+clear of the objects resting on it and at least 20 cm from where the picked object starts, and clickable:
+the layout's rendered cloud has a point within the click radius of it (a board above the cameras' view,
+e.g. the top board of a reshaped tall shelf, gets no clicks; the layout is replaced). The object is named
+(as the demo's hidden objects are), not clicked: the benchmark measures planning and execution, not click
+resolution.
 """
 
 from __future__ import annotations
@@ -32,7 +34,7 @@ GAP = 0.04  #: [m] horizontal gap kept between the placed object and the objects
 SIDE_MARGIN = 0.03  #: [m] gap kept to the support's side edges
 HEADROOM = 0.04  #: [m] free height needed above the placed object under a board
 SPOT_TRIES = 200  #: [-] place spot samples before the layout is skipped
-SPARE_LAYOUTS = 3  #: [-] extra layouts per group for those without a free place spot
+SPARE_LAYOUTS = 12  #: [-] extra layouts per group for those without a free, clickable place spot
 
 
 @dataclass(frozen=True)
@@ -119,6 +121,23 @@ def place_spot(
     raise SceneError(f"no free spot for {obj} on {support} of {spec.name} in {SPOT_TRIES} samples")
 
 
+def clickable(spec: SceneSpec, spot: tuple[float, float, float]) -> bool:
+    """Whether a click at ``spot`` [m] hits the cloud of ``spec`` rendered from its cameras (a labelled point
+    within the click radius of :class:`~hsi_planning.scheduler.goals.GoalConfig`)."""
+    from scipy.spatial import cKDTree
+
+    from hsi_planning.perception import CloudConfig
+    from hsi_planning.perception.cloud import UNLABELLED
+    from hsi_planning.scheduler import SceneWorld
+    from hsi_planning.scheduler.goals import GoalConfig
+
+    cloud = SceneWorld(spec, cloud_config=CloudConfig(voxel_size=0.01)).cloud()
+    pts = cloud.points[cloud.labels != UNLABELLED]
+    if pts.shape[0] == 0:
+        return False
+    return float(cKDTree(pts).query(np.asarray(spot), k=1)[0]) <= GoalConfig().click_radius
+
+
 def make_cases(n: int, seed: int) -> list[Case]:
     """``n`` cases cycling over the (template, plain/reshape) groups (case ``k`` is of group ``k mod 10``).
     A layout without a free place spot is replaced by the group's next variant."""
@@ -139,6 +158,8 @@ def make_cases(n: int, seed: int) -> list[Case]:
                     layout, template.obj, template.place_on, np.random.default_rng([seed, g, i])
                 )
             except SceneError:
+                continue
+            if not clickable(layout, spot):
                 continue
             tag = f"{template.name}/{'reshape' if reshape else 'plain'}/{i}"
             cases.append(Case(found * len(groups) + g, tag, template, reshape, group_seed, i, layout, spot))

@@ -321,3 +321,19 @@ def test_cloud_obstacles_distance_and_without() -> None:
     np.testing.assert_allclose(field.push_direction([[0.0, 0.0, 0.5]]), [[0.0, 0.0, 1.0]])
     only_a: Any = field.without(["b"])
     assert only_a.names == ("a",) and only_a.distance([[0.9, 0.0, 0.0]])[0] == pytest.approx(0.89)
+
+
+def test_aside_spots_keep_a_top_down_take_out_free_without_excluding_everything(kitchen: SceneWorld) -> None:
+    from hsi_planning.scheduler.auxiliary import free_spots
+
+    state = WorldState(opened=frozenset({"drawer_unit1/drawer1"}))
+    cloud = kitchen.state_cloud(state)
+    start = kitchen.object_position("mug2", state)
+    up = np.array([0.0, 0.0, 1.0])  # lifted out of the drawer from above
+    spots = free_spots(kitchen, state, "can1", cloud, avoid=(start, up, 0.05), limit=50)
+    assert spots, "a vertical take-out must not rule out every spot"
+    for _, pos in spots:
+        assert np.linalg.norm(pos[:2] - start[:2]) >= 0.05  # the column above the mug stays free
+    front = np.array([-1.0, 0.0, 0.0])  # a horizontal take-out still excludes its strip
+    strip = free_spots(kitchen, state, "can1", cloud, avoid=(start, front, 0.05), limit=50)
+    assert all(not ((p[0] - start[0]) * -1.0 > -0.05 and abs(p[1] - start[1]) < 0.05) for _, p in strip)

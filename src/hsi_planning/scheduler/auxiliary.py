@@ -245,19 +245,27 @@ def free_spots(
             d, _ = cKDTree(slab[:, :2]).query(world_xy[:, :2], k=1)
             ok &= d > radius + config.spot_margin
         if avoid is not None:
-            start, direction, half = avoid
-            dh = np.array([direction[0], direction[1]]) / max(
-                float(np.hypot(direction[0], direction[1])), 1e-9
-            )
-            rel = world_xy[:, :2] - start[:2]
-            along = rel @ dh
-            across = np.abs(rel @ np.array([-dh[1], dh[0]]))
-            ok &= ~((along > -half) & (across < half + radius + config.corridor_margin))
+            ok &= ~_in_corridor(world_xy[:, :2], avoid, radius + config.corridor_margin)
         for p in world_xy[ok]:
             pos = np.array([p[0], p[1], support.top_z])
             found.append((float(np.linalg.norm(pos - here)), support.name, pos))
     found.sort(key=lambda f: f[0])
     return [(name, pos) for _, name, pos in found[:limit]]
+
+
+def _in_corridor(xy: F64, avoid: tuple[F64, F64, float], clearance: float) -> NDArray[np.bool_]:
+    """(N,) spots ``xy`` (N, 2) [m] whose footprint (``clearance`` [m] beyond the centre) reaches into the
+    take-out corridor ``avoid`` = (start (3,), direction (3,), half width [m]): the strip from the start along
+    the horizontal direction, or for a vertical take-out (from above) the disc around the start."""
+    start, direction, half = avoid
+    rel = xy - np.asarray(start)[:2]
+    horizontal = float(np.hypot(direction[0], direction[1]))
+    if horizontal < 0.2:  # lifted out upwards: keep the column above the start free
+        return np.asarray(np.linalg.norm(rel, axis=1) < half + clearance)
+    dh = np.array([direction[0], direction[1]]) / horizontal
+    along = rel @ dh
+    across = np.abs(rel @ np.array([-dh[1], dh[0]]))
+    return np.asarray((along > -half) & (across < half + clearance))
 
 
 def support_open(world: SceneWorld, support: SupportSurface, kind: str, state: WorldState) -> bool:
