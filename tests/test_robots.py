@@ -129,7 +129,7 @@ def test_ur5e_uses_published_parameters() -> None:
     robot = RobotModel("dual_ur5e")
     masses = [robot.model.inertias[robot.model.getJointId(j)].mass for j in robot.arm_joints["left"]]
     np.testing.assert_allclose(masses[:5], UR5E_MASS[:5], atol=1e-12)
-    assert masses[5] == pytest.approx(UR5E_MASS[5] + 0.8, abs=1e-9)  # wrist 3 carries the gripper palm
+    assert masses[5] == pytest.approx(UR5E_MASS[5] + 0.95, abs=1e-9)  # wrist 3 carries the gripper palm
     for side in ("left", "right"):
         for j in robot.arm_joints[side]:
             i, v = robot.q_index(j), robot.v_index(j)
@@ -137,7 +137,7 @@ def test_ur5e_uses_published_parameters() -> None:
             assert (robot.q_lower[i], robot.q_upper[i]) == (-limit, limit)
             assert robot.v_max[v] == pytest.approx(math.pi)
         fingers = [robot.q_upper[robot.q_index(j)] for j in robot.gripper_joints[side]]
-        assert sum(fingers) == pytest.approx(0.085)
+        assert sum(fingers) == pytest.approx(0.14)  # a 2F-140-like gripper
 
 
 def test_jacobian_matches_finite_differences(robot: RobotModel) -> None:
@@ -178,7 +178,7 @@ def test_urdf_limits_match_mjcf(robot: RobotModel) -> None:
 def test_inertias_are_physical(robot: RobotModel) -> None:
     m = robot.load_mujoco()
     total = float(m.body_subtreemass[0])
-    assert total == pytest.approx(160.24 if robot.name == "dual_ur5e" else 70.04, abs=0.01)
+    assert total == pytest.approx(160.58 if robot.name == "dual_ur5e" else 70.04, abs=0.01)
     for inertia in robot.model.inertias[1:]:
         assert inertia.mass >= 0.0
         if inertia.mass > 0:

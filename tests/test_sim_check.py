@@ -18,6 +18,7 @@ import pytest
 
 from hsi_planning.errors import ConfigError, MessageError, RetargetError
 from hsi_planning.scene import handle_position
+from hsi_retarget.gripper_dwell import DwellConfig
 from hsi_retarget.joint_trajectory import ContactEvent, JointTrajectory
 from hsi_retarget.robots import RobotModel
 from hsi_retarget.sim_check import (
@@ -287,7 +288,7 @@ def test_door_opened_by_pulling_the_handle() -> None:
     low[robot.q_index("torso_lift_joint")] = 0.0
     s = Script(world).joints(low, 2.5)
     s.move("right", _pose(FRONT, handle - (0.12, 0, 0)), 1.5).move("right", _pose(FRONT, handle), 1.0)
-    s.event("right", "grasp", part).hold(0.5)
+    s.event("right", "grasp", part).hold(DwellConfig().after_s)  # as the retargeter dwells
     angle = math.radians(68.0)
     for k in range(1, 15):  # arc of the TCP about the hinge axis, gripper turning with the door
         rot = _rz(angle * k / 14)
@@ -308,7 +309,7 @@ def test_drawer_pulled_by_its_handle() -> None:
     low[robot.q_index("torso_lift_joint")] = 0.0
     s = Script(world).joints(low, 2.5)
     s.move("right", _pose(SIDE, handle - (0.12, 0, 0)), 1.5).move("right", _pose(SIDE, handle), 1.0)
-    s.event("right", "grasp", part).hold(0.5)
+    s.event("right", "grasp", part).hold(DwellConfig().after_s)  # as the retargeter dwells
     s.move("right", _pose(SIDE, handle - (0.25, 0, 0)), 2.0).event("right", "release", part).hold(0.3)
     report = execute(world, s.build(), goal=TaskGoal(open_part=part))
     assert report.opening is not None and 0.2 <= report.opening <= 0.3

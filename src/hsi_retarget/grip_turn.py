@@ -44,21 +44,25 @@ F64 = NDArray[np.float64]
 _HANDLE_PRIM = "handle"  #: the bar primitive's part name (:mod:`hsi_planning.scene.furniture`)
 
 
+DEFAULT_OPENING = 0.085  #: [m] finger opening assumed without a robot (:attr:`GripTurnConfig.opening` 0)
+
+
 @dataclass(frozen=True)
 class GripTurnConfig:
     """When and how far the gripper turns about its approach axis."""
 
     bars: bool = True  #: fingers across door/drawer handle bars [-]
     objects: bool = True  #: fingers across the narrow side of free objects too wide for them [-]
-    opening: float = 0.085  #: [m] the gripper's full finger opening
+    #: [m] the gripper's full finger opening; 0: the robot's (its two fingers' travel, set by the retargeting)
+    opening: float = 0.0
     clearance: float = 0.005  #: [m] free space wanted on each side of an object between the open fingers
     step_deg: float = 5.0  #: [deg] resolution of the search for an object's narrowest side
     turn_s: float = 1.0  #: [s] shortest time the turn eases in before a grasp and out after a release
 
     def __post_init__(self) -> None:
-        if not (0.0 < self.opening < 0.5 and 0.0 <= self.clearance < 0.5 * self.opening):
+        if not (0.0 <= self.opening < 0.5 and 0.0 <= self.clearance < max(0.5 * self.opening, 0.5)):
             raise ConfigError(
-                f"GripTurnConfig: opening in (0, 0.5) m and clearance in [0, opening/2) m, got "
+                f"GripTurnConfig: opening in [0, 0.5) m and clearance in [0, opening/2) m, got "
                 f"{self.opening}, {self.clearance}"
             )
         if not 0.1 <= self.step_deg <= 45.0:
@@ -138,7 +142,8 @@ def narrow_side_angle(rotation: F64, prims: Sequence[Any], config: GripTurnConfi
     ``clearance`` on both sides along the wrist's y axis (``rotation`` (3, 3), world); else the smallest turn
     about the wrist's x axis to the object's narrowest side (within 1 mm)."""
     cfg = config if config is not None else GripTurnConfig()
-    if not prims or _width(prims, rotation[:, 1]) <= cfg.opening - 2.0 * cfg.clearance:
+    opening = cfg.opening or DEFAULT_OPENING
+    if not prims or _width(prims, rotation[:, 1]) <= opening - 2.0 * cfg.clearance:
         return 0.0
     n = round(90.0 / cfg.step_deg)
     angles = np.radians(cfg.step_deg) * np.arange(-n, n + 1)

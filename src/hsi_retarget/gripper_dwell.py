@@ -2,10 +2,10 @@
 
 A schedule's ``grasp`` / ``release`` keyframe marks the *end* of the human hand's short closing time
 (``SchedulerConfig.grasp_time``, 0.3 s); the MuJoCo check starts closing the gripper at the event, and a
-2F-85-like gripper needs ``stroke / speed`` (about 0.57 s) to close. Without a pause the arm pulls a door
-handle or lifts an object before the fingers hold it. :func:`add_gripper_dwell` inserts a standstill of
-``after_s`` at every grasp and release event (and ``before_release_s`` before a release, so a carried
-object comes to rest before it is let go), shifting the rest of the trajectory and its events.
+2F-140-like gripper needs ``stroke / speed`` (0.7 s from fully open) to close. Without a pause the arm
+pulls a door handle or lifts an object before the fingers hold it. :func:`add_gripper_dwell` inserts a
+standstill of ``after_s`` at every grasp and release event (and ``before_release_s`` before a release,
+so a carried object comes to rest before it is let go), shifting the rest of the trajectory and its events.
 """
 
 from __future__ import annotations

@@ -16,7 +16,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, TypeAlias, cast
 
 import numpy as np
@@ -27,7 +27,13 @@ from hsi_planning.errors import ConfigError, RetargetError
 from hsi_planning.trajectory import WristTrajectory
 from hsi_retarget.carry_correction import correct_carry
 from hsi_retarget.grasp_depth import GraspDepthConfig, grasp_windows, shape_grasps
-from hsi_retarget.grip_turn import GripTurnConfig, handle_bar_axes, object_prims, turn_grips
+from hsi_retarget.grip_turn import (
+    DEFAULT_OPENING,
+    GripTurnConfig,
+    handle_bar_axes,
+    object_prims,
+    turn_grips,
+)
 from hsi_retarget.human_motion import SIDES, HumanMotion
 from hsi_retarget.humanoid_ik import SupportConfig, plan_footsteps
 from hsi_retarget.ik import IKConfig, IKSolver, IKTargets
@@ -283,6 +289,10 @@ def retarget(
     """
     cfg = config or RetargetConfig()
     model = robot if isinstance(robot, RobotModel) else RobotModel(robot)
+    if cfg.grip.opening == 0.0:  # the robot's gripper decides which grasps turn across
+        fingers = next(iter(model.gripper_joints.values()), ())
+        opening = float(sum(model.q_upper[model.q_index(j)] for j in fingers))
+        cfg = replace(cfg, grip=replace(cfg.grip, opening=opening or DEFAULT_OPENING))
     motion, handle_turns = _human_motion(source, cfg, scene)
     mapping = cfg.mapping or MappingConfig(anchor="shoulder" if motion.shoulder_position else "world")
     t0 = time.perf_counter()

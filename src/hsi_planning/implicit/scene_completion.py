@@ -47,30 +47,32 @@ PANEL = 0.018
 _SURFACE_ONLY: tuple[str, ...] = ("floor",)
 #: Object classes whose default size is (diameter, height): upright cylinders.
 ROUND_KINDS: tuple[str, ...] = tuple(k for k, d in DEFAULTS.items() if len(d.size) == 2)
+#: [m] points farther than this off a fitted circle are not part of the round body (a mug's handle).
+_ROUND_OUTLIER = 0.006
 #: [-] points a label needs before it is completed.
 _MIN_POINTS = 8
 #: [m] furniture this far around an object is searched for its support (and the normals' neighbours).
 _SEARCH = 0.15
 
 
-def _fit_round(own: F64, width: float) -> tuple[F64, float]:
+def fit_round(own: F64, width: float) -> tuple[F64, float]:
     """(centre (2,) [m], radius [m]) of the upright cylinder through the lower half of ``own`` (N, 3) [m]
-    (a bottle's body, not its neck): algebraic circle fit of the horizontal coordinates, the radius
+    (a bottle's body, not its neck): algebraic circle fit of the horizontal coordinates, refitted without
+    the points more than :data:`_ROUND_OUTLIER` off the circle (a mug's handle) when most stay, the radius
     clipped to the class's range (``width`` [m] × ``CLASS_SCALE`` / 2) and the centre kept within that
     radius of the visible points' centre (a poor fit of a short arc)."""
     z = own[:, 2]
     low = own[z <= z.min() + 0.5 * (z.max() - z.min())][:, :2]
     mid = low.mean(axis=0)
     r_lo, r_hi = 0.5 * width * CLASS_SCALE[0], 0.5 * width * CLASS_SCALE[1]
-    a = np.column_stack([low, np.ones(len(low))])
-    b = -(low**2).sum(axis=1)
-    try:
-        (d, e, f), *_ = np.linalg.lstsq(a, b, rcond=None)
-    except np.linalg.LinAlgError:
+    fit = _circle(low)
+    if fit is None:
         return mid, r_lo
-    centre = np.array([-0.5 * d, -0.5 * e])
-    r2 = float(centre @ centre - f)
-    radius = float(np.clip(np.sqrt(r2) if r2 > 0.0 else r_lo, r_lo, r_hi))
+    off_circle = np.abs(np.linalg.norm(low - fit[0], axis=1) - fit[1])
+    body = off_circle <= _ROUND_OUTLIER
+    if 0.6 * len(low) <= body.sum() < len(low):
+        fit = _circle(low[body]) or fit
+    centre, radius = fit[0], float(np.clip(fit[1], r_lo, r_hi))
     off = centre - mid
     if not np.isfinite(off).all():
         return mid, radius
@@ -78,6 +80,23 @@ def _fit_round(own: F64, width: float) -> tuple[F64, float]:
     if dist > radius:
         centre = mid + off * (radius / dist)
     return centre, radius
+
+
+def _circle(xy: F64) -> tuple[F64, float] | None:
+    """Algebraic (Kasa) circle fit of ``xy`` (N, 2) [m]: centre (2,), radius [m]; ``None`` if degenerate."""
+    if len(xy) < 3:
+        return None
+    a = np.column_stack([xy, np.ones(len(xy))])
+    b = -(xy**2).sum(axis=1)
+    try:
+        (d, e, f), *_ = np.linalg.lstsq(a, b, rcond=None)
+    except np.linalg.LinAlgError:
+        return None
+    centre = np.array([-0.5 * d, -0.5 * e])
+    r2 = float(centre @ centre - f)
+    if not (np.isfinite(centre).all() and r2 > 0.0):
+        return None
+    return centre, float(np.sqrt(r2))
 
 
 def _disk(centre: F64, radius: float, spacing: float) -> F64:
@@ -186,7 +205,7 @@ def complete_cloud(
             z = support_height(own, furniture[near])
             parts = []
             if cls in ROUND_KINDS:  # the far side the cameras miss: a fitted upright cylinder
-                centre, radius = _fit_round(own, DEFAULTS[cls].size[0])
+                centre, radius = fit_round(own, DEFAULTS[cls].size[0])
                 parts.append(
                     _slab(_hull_fill(_disk(centre, radius, spacing), spacing), _levels(lo[2], hi[2], spacing))
                 )

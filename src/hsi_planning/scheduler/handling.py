@@ -21,10 +21,12 @@ from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation, Slerp
 
 from hsi_planning.errors import PlanningError
+from hsi_planning.implicit.scene_completion import ROUND_KINDS, fit_round
 from hsi_planning.perception.cloud import LabelledCloud
 from hsi_planning.planning import PlanRequest
 from hsi_planning.scene.geometry import support_of
 from hsi_planning.scene.model import support_surface
+from hsi_planning.scene.objects import DEFAULTS
 from hsi_planning.scheduler.actions import TaskRun
 from hsi_planning.scheduler.auxiliary import approach_axis, free_pose
 from hsi_planning.scheduler.reach_planner import contact_from_points
@@ -34,12 +36,32 @@ from hsi_planning.trajectory import Action, Hand, WristTrajectory
 
 F64 = NDArray[np.float64]
 _UP = np.array([0.0, 0.0, 1.0])
+#: [m] points of a round object farther than this outside its fitted cylinder are a protrusion (handle).
+_HANDLE_GAP = 0.01
+#: [-] fraction of 10-degree sectors around a round object's fitted axis its points must cover for the
+#: fitted axis to be its centre (a short arc seen past a door or a blocker fits poorly)
+_ROUND_COVERAGE = 0.6
 
 
-def bottom_centre(points: F64) -> F64:
-    """(3,) [m] bottom centre of a point set's box."""
+def bottom_centre(points: F64, kind: str = "") -> F64:
+    """(3,) [m] bottom centre of a point set's box; for a round object class ``kind`` (mug, can, bottle, ...)
+    without the points off the upright cylinder fitted to it (a mug's handle does not shift the centre), and
+    on that cylinder's axis when the points go around most of it (:data:`_ROUND_COVERAGE`)."""
+    centre = None
+    if kind in ROUND_KINDS and len(points) >= 8:
+        centre, radius = fit_round(points, DEFAULTS[kind].size[0])
+        rel = points[:, :2] - centre
+        body = np.linalg.norm(rel, axis=1) <= radius + _HANDLE_GAP
+        if body.sum() >= 0.6 * len(points):
+            points, rel = points[body], rel[body]
+        bins = np.floor((np.arctan2(rel[:, 1], rel[:, 0]) + np.pi) / (2.0 * np.pi) * 36.0).astype(int)
+        if np.unique(np.clip(bins, 0, 35)).size < _ROUND_COVERAGE * 36:  # a short arc: the box is safer
+            centre = None
     lo, hi = points.min(axis=0), points.max(axis=0)
-    return np.array([0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), lo[2]])
+    out = np.array([0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), lo[2]])
+    if centre is not None:
+        out[:2] = centre
+    return out
 
 
 def _retimed(tr: WristTrajectory, duration: float) -> WristTrajectory:
@@ -203,14 +225,15 @@ def grasp(run: TaskRun, obj: str, hands: tuple[Hand, ...]) -> None:
     tl.step(f"reach and grasp {obj} with {label}")
     tl.planned(approaches, "reach", "reach", "grasp", obj)
     tl.hold(c.grasp_time, "grasp", {h: ("grasp", "", obj) for h in hands})
-    run.shapes[obj] = pts - bottom_centre(pts)
+    kind = run.world.spec.object_by_name(obj).kind
+    run.shapes[obj] = pts - bottom_centre(pts, kind)
     run.state = run.state.with_held(obj, True)
     for h in hands:
         tl.wrists[h].holding = obj
     tl.planned(leaves, "take_out", "take_out", "", obj)
     tl.step(f"take {obj} out")
     if len(hands) == 2:  # carry the object in front of the body, the hands keeping their grip
-        run.grips[obj] = (axes, {h: approaches[h].position[-1] - bottom_centre(pts) for h in hands})
+        run.grips[obj] = (axes, {h: approaches[h].position[-1] - bottom_centre(pts, kind) for h in hands})
         mid = 0.5 * (tl.position("left") + tl.position("right"))
         yaw = tl.hip.yaw
         unturn = np.array(

@@ -5,7 +5,8 @@ above the floor), a prismatic ``torso_lift_joint`` (0–0.45 m) moving ``torso_l
 hang from a V-shaped bracket: each arm base is tilted 45° outwards about x, so the shoulder-pan axes
 point up and out, the shoulder points (``{side}_shoulder``) are 0.40 m apart at 1.125 + lift [m] above the
 floor (1.35 m at mid lift), and the singular cylinder around each pan axis lies outside the workspace in
-front. Each arm ends in a Robotiq 2F-85-like gripper with a ``{side}_tcp`` frame 0.145 m out of the flange.
+front. Each arm ends in a Robotiq 2F-140-like gripper (140 mm opening: mugs and bottles fit across their
+body with room to spare) with a ``{side}_tcp`` frame 0.145 m out of the flange.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ from hsi_retarget.robots.description import (
     rot_z,
     transform,
 )
-from hsi_retarget.robots.gripper import ROBOTIQ_2F85, parallel_gripper
+from hsi_retarget.robots.gripper import ROBOTIQ_2F140, parallel_gripper
 from hsi_retarget.robots.ur5e import JOINTS, UR5E_D, ur5e_arm
 
 NAME = "dual_ur5e"
@@ -139,14 +140,14 @@ def dual_ur5e_description() -> RobotDescription:
             side,
             arm_links[-1].name,
             arm_frames[-1].pose,
-            ROBOTIQ_2F85,
+            ROBOTIQ_2F140,
             side,  # type: ignore[arg-type]
         )
         links += arm_links + grip_links
         frames += arm_frames + grip_frames
         home.update({f"{side}_{j}_joint": v for j, v in zip(JOINTS, HOME_ARM[side], strict=True)})
         home.update(
-            {f"{side}_finger_a_joint": ROBOTIQ_2F85.stroke, f"{side}_finger_b_joint": ROBOTIQ_2F85.stroke}
+            {f"{side}_finger_a_joint": ROBOTIQ_2F140.stroke, f"{side}_finger_b_joint": ROBOTIQ_2F140.stroke}
         )
     return RobotDescription(
         name=NAME,
