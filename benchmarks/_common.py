@@ -37,12 +37,23 @@ from hsi_planning.mocap.reach import ReachConfig, lowpass, segment_reaches, wris
 from hsi_planning.mocap.skeleton import forward_kinematics
 from hsi_planning.perception.render import CloudConfig
 from hsi_planning.planning import PlanRequest, PlanResult
-from hsi_planning.scene import LayoutConfig, SceneSpec, generate_layouts, load_scene_spec, target_reachable
+from hsi_planning.scene import (
+    LayoutConfig,
+    SceneSpec,
+    exposing_fraction,
+    generate_layouts,
+    load_scene_spec,
+    target_reachable,
+)
+from hsi_planning.scheduler.world import DOOR_FRACTION, DRAWER_FRACTION
 from hsi_planning.trajectory import WristTrajectory
 
 REPO = Path(__file__).resolve().parents[1]
 SCENES = ("kitchen", "narrow_shelf", "cluttered_drawer")
 START_CENTRE = (0.2, 0.25, 1.0)  #: [m] free wrist pose like the training data (y: to the hand's side)
+START_FREE = 0.08  #: [m] the start wrist keeps this far from the ground truth (else the person steps back)
+START_BACK_STEP = 0.02  #: [m] step back (−x) of a start wrist too close to an opened drawer or door
+START_BACK_MAX = 0.40  #: [m] at most this far
 RELAX = 0.10  #: [m] path length before the contact over which the required clearance relaxes
 SAFETY_RADIUS = 0.20  #: [m] the safety distance is averaged within this distance of the contact
 CONTACT_TOLERANCE = 0.02  #: [m] the approach must end this close to the ground-truth contact
@@ -198,15 +209,18 @@ class Prepared:
 
 
 def prepare(case: Case) -> Prepared:
-    """Render ``case`` with its target's container opened and build the request (as in training)."""
-    data = DataBuildConfig()  # open doors/drawers as far as in the training data
+    """Render ``case`` with its target's container opened (doors as far as the scheduler opens them,
+    :data:`~hsi_planning.scheduler.world.DOOR_FRACTION`; a drawer as far as the target needs to come out
+    from under the carcass, :func:`~hsi_planning.scene.exposing_fraction`: at least as far as in the
+    training data, at most as far as the scheduler pulls, ``DRAWER_FRACTION``) and build the request."""
+    data = DataBuildConfig()
     for target in case.targets:  # the first target the cameras see (as the training data build)
         scene = render_opened(
             case.spec,
             parts_to_open(case.spec, target),
             cloud_config=CloudConfig(),
-            door_fraction=data.door_fraction,
-            drawer_fraction=data.drawer_fraction,
+            door_fraction=DOOR_FRACTION,
+            drawer_fraction=exposing_fraction(case.spec, target, data.drawer_fraction, DRAWER_FRACTION),
         )
         if int((scene.cloud.labels == scene.label_ids[target]).sum()) >= MIN_TARGET_POINTS:
             break
@@ -219,6 +233,11 @@ def prepare(case: Case) -> Prepared:
     y = float(np.asarray(mesh.bounds).mean(axis=0)[1])
     sx, sy, sz = START_CENTRE
     start = np.array([sx, y + side * sy, sz]) + np.asarray(case.noise)
+    field = ObstacleField({k: m for k, m in scene.meshes.items() if k != target})
+    for _ in range(round(START_BACK_MAX / START_BACK_STEP)):  # a drawer pulled out to the body: step back
+        if float(field.distance(start[None])[0]) >= START_FREE:
+            break
+        start[0] -= START_BACK_STEP
     request = PlanRequest(
         cloud=scene.cloud,
         target=target,
@@ -227,7 +246,6 @@ def prepare(case: Case) -> Prepared:
         start_position=start,
         approach_axis=axis,
     )
-    field = ObstacleField({k: m for k, m in scene.meshes.items() if k != target})
     return Prepared(
         case,
         target,

@@ -2,10 +2,11 @@
 
 Per layout: one target reachable in a single reach (no other object in its corridor: one behind a
 blocker needs the scheduler to move the blocker first) that the cameras see (seeded pick, ≥ 10 cloud
-points), rendered with its container opened (as the scheduler would), a hand (alternating), grasp, a
-free start pose near the body like the training demonstrations (the person stands at (0, target y)
-facing +x); the planner gets
-the labelled cloud and the approach axis from the spec. Checked against the **ground-truth meshes**
+points), rendered with its container opened (a door as far as the scheduler opens it, a drawer as far
+as the target needs to come out from under the carcass: ``_common.prepare``), a hand (alternating),
+grasp, a free start pose near the body like the training demonstrations (the person stands at
+(0, target y) facing +x, stepping back from a drawer pulled out to the wrist); the planner gets the
+labelled cloud and the approach axis from the spec. Checked against the **ground-truth meshes**
 (open3d distance, :class:`hsi_planning.demos.ObstacleField`, every mesh but the target's):
 
 - success: approach and leave keep a ``--hand-radius`` sphere and, on the carrying leave, the held

@@ -182,3 +182,25 @@ def test_cli_generate_writes_specs_and_models(repo_root: Path, tmp_path: Path) -
         assert load_scene_spec(tmp_path / "gen" / f"{layout.name}.yaml") == layout
         model = mujoco.MjModel.from_xml_path(str(tmp_path / "gen" / f"{layout.name}.xml"))
         assert model.body("can1").id > 0
+
+
+def test_drawer_is_pulled_as_far_as_the_object_needs(repo_root: Path) -> None:
+    from hsi_planning.implicit.data_scene import render_opened
+    from hsi_planning.scene import exposing_fraction
+
+    spec = _spec(repo_root, "cluttered_drawer")
+    front = 0.875 - 0.55 / 2  # drawer_unit1's carcass front [m]
+    front_can, mid_box = (exposing_fraction(spec, n, 0.01, 1.0) for n in ("can1", "box1"))
+    assert 0.01 < front_can < mid_box < 1.0
+    assert exposing_fraction(spec, "bowl1", 0.01, 1.0) == 1.0  # at the back: never all out
+    for name, fraction in (("can1", front_can), ("box1", mid_box)):  # real slide joint in MuJoCo
+        opened = render_opened(spec, ["drawer_unit1/drawer1"], drawer_fraction=fraction)
+        back_edge = float(np.asarray(opened.meshes[name].bounds)[1, 0])
+        assert back_edge == pytest.approx(front - 0.05, abs=2e-3)  # out from under the carcass, 5 cm spare
+    assert exposing_fraction(spec, "can1", 0.6, 0.9) == 0.6  # clipped to the range
+    assert exposing_fraction(spec, "bowl1", 0.1, 0.5) == 0.5
+    assert exposing_fraction(spec, "mug2", 0.6, 0.9) == 0.6  # on the counter: nothing to pull
+    with pytest.raises(ConfigError, match="least"):
+        exposing_fraction(spec, "can1", 0.9, 0.6)
+    with pytest.raises(SceneError):
+        exposing_fraction(spec, "nothing", 0.6, 0.9)

@@ -15,7 +15,7 @@ from hsi_planning.scene.labels import Label, LabelTable, scene_labels
 from hsi_planning.scene.layout import LayoutConfig, generate_layouts
 from hsi_planning.scene.mjcf import build_mjcf, write_mjcf
 from hsi_planning.scene.model import object_pose, support_surface, support_surfaces
-from hsi_planning.scene.reach import ReachConfig, target_reachable
+from hsi_planning.scene.reach import ReachConfig, exposing_fraction, target_reachable
 from hsi_planning.scene.spec import CameraSpec, FurnitureSpec, ObjectSpec, SceneSpec, load_scene_spec
 
 __all__ = [
@@ -31,6 +31,7 @@ __all__ = [
     "articulated_parts",
     "build_mjcf",
     "container_of",
+    "exposing_fraction",
     "generate_layouts",
     "handle_position",
     "load_scene_spec",

@@ -9,6 +9,9 @@ Works in the frame of the target's support with the axis-aligned boxes of the ob
   the corridor itself must be free (one reach, no blocker to move first);
 - top access (drawer, counter, table): on two opposite sides (±x or ±y) the gap to the next object or
   wall is at least ``finger_clearance``.
+
+:func:`exposing_fraction` says how far a drawer must be pulled for an object in it to come out from under
+the carcass.
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hsi_planning.errors import ConfigError
+from hsi_planning.scene.furniture import furniture_bodies, furniture_frame
 from hsi_planning.scene.model import object_pose_on, support_surface
 from hsi_planning.scene.spec import SceneSpec
 from hsi_planning.scene.validate import object_points
@@ -106,3 +110,32 @@ def target_reachable(
     gaps = _side_gaps(target, boxes, walls)
     c = config.finger_clearance
     return bool((gaps[0] >= c and gaps[1] >= c) or (gaps[2] >= c and gaps[3] >= c))
+
+
+def exposing_fraction(spec: SceneSpec, target: str, least: float, most: float, margin: float = 0.05) -> float:
+    """[-] how far (fraction of the travel) the drawer holding ``target`` must be pulled for the whole
+    object to come out from under the carcass with ``margin`` [m] to spare (room for the fingers and the
+    hand behind it), clipped to [``least``, ``most``]; ``least`` for a target not in a drawer. A person
+    pulls a drawer as far as the object needs: an object at the back of a deep drawer needs more.
+
+    Raises:
+        ConfigError: ``least``/``most`` outside (0, 1] or ``least > most``, or a negative ``margin``.
+    """
+    if not (0.0 < least <= most <= 1.0) or margin < 0.0:
+        raise ConfigError(
+            f"exposing_fraction: need 0 < least <= most <= 1 and margin >= 0, got {least}, {most}"
+        )
+    o = spec.object_by_name(target)
+    support = support_surface(spec, o.on)
+    f = spec.furniture_by_name(support.furniture)
+    if f.kind != "drawer_unit":
+        return least
+    plan = next((b for b in furniture_bodies(f) if b.name == support.body and b.joint is not None), None)
+    if plan is None or plan.joint is None or plan.joint.range[1] <= 0.0:
+        return least
+    pts = object_points(o, object_pose_on(o, support))
+    frame = furniture_frame(f)
+    local = (pts - frame[:3, 3]) @ frame[:3, :3]  # the drawer slides along the furniture frame's -x
+    front = -0.5 * f.size[1]
+    need = (float(local[:, 0].max()) + margin - front) / plan.joint.range[1]
+    return float(np.clip(need, least, most))

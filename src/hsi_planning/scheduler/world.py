@@ -27,6 +27,8 @@ from hsi_planning.scene.spec import SceneSpec
 
 _LOG = logging.getLogger(__name__)
 F64 = NDArray[np.float64]
+DOOR_FRACTION = 0.9  #: [-] a door the schedule opens swings to this fraction of its hinge range
+DRAWER_FRACTION = 0.9  #: [-] a drawer the schedule opens is pulled to this fraction of its travel
 #: Fewer points than this: an object counts as hidden in the cloud.
 MIN_VISIBLE = 30
 
@@ -83,8 +85,8 @@ class SceneWorld:
         spec: SceneSpec,
         observed: LabelledCloud | None = None,
         cloud_config: CloudConfig | None = None,
-        door_fraction: float = 0.9,
-        drawer_fraction: float = 0.9,
+        door_fraction: float = DOOR_FRACTION,
+        drawer_fraction: float = DRAWER_FRACTION,
     ) -> None:
         if not (0.0 < door_fraction <= 1.0 and 0.0 < drawer_fraction <= 1.0):
             raise SceneError("door_fraction and drawer_fraction must be in (0, 1]")
