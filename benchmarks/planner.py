@@ -105,6 +105,13 @@ def summarize(rows: list[dict[str, Any]]) -> dict[str, Any]:
     }
 
 
+def _stage_medians(rows: list[dict[str, Any]]) -> dict[str, float]:
+    """Median [ms] of each planning stage over the planned rows (``timings`` of :func:`evaluate`)."""
+    timed = [r["timings"] for r in rows if r.get("planned") and r.get("timings")]
+    keys = [k for k in (timed[0] if timed else {}) if all(k in t for t in timed)]
+    return {k: 1000.0 * float(np.median([t[k] for t in timed])) for k in keys}
+
+
 def markdown(results: dict[str, Any]) -> str:
     """A Markdown table of the summaries."""
     cols = [
@@ -131,6 +138,11 @@ def markdown(results: dict[str, Any]) -> str:
     ]
     for name, summary in results["models"].items():
         lines.append(f"| {name} | " + " | ".join(f.format(summary[k]) for k, _, f in cols) + " |")
+    for name, rows in results.get("rows", {}).items():
+        stages = _stage_medians(rows)
+        if stages:
+            lines += ["", f"Median stage times of {name} [ms] (the machine's speed shows in `fields`, fast"]
+            lines += ["marching in C): " + ", ".join(f"{k} {v:.0f}" for k, v in stages.items()) + "."]
     lines += [
         "",
         f"Hand sphere {results['hand_radius']} m; contact tolerance {CONTACT_TOLERANCE} m.",
