@@ -7,7 +7,7 @@ direction (out of the palm) and y along the finger axis (finger ``a`` opens towa
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -62,18 +62,14 @@ ROBOTIQ_2F85 = GripperSpec(
 
 #: Robotiq 2F-140-like: 140 mm opening (mugs, bottles and boxes up to ~13 cm fit with room to spare),
 #: the 2F-85's finger and palm depth so the TCP stays where it was, a wider palm for the longer stroke.
-ROBOTIQ_2F140 = GripperSpec(
+ROBOTIQ_2F140 = replace(
+    ROBOTIQ_2F85,
     stroke=0.07,
     palm_size=(0.07, 0.15, 0.08),
     palm_mass=0.95,
-    finger_size=(0.022, 0.014, 0.055),
     finger_mass=0.07,
-    tcp_depth=0.015,
     speed=0.1,
     force=125.0,
-    kp=2000.0,
-    kv=30.0,
-    coupling=0.01,
 )
 
 
