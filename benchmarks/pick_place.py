@@ -16,7 +16,8 @@ stage, reasons, diagnosis, perturbation events and re-plans) is in the JSON. Wri
 ``pick_place.md`` and ``pick_place.png`` (success per cell, IK time histogram) to ``--out``.
 
 Usage: ``python benchmarks/pick_place.py [--quick] [--episodes 25] [--workers 1] [--out benchmarks/results]``
-(also ``hsi bench pick_place``); ``--robots``, ``--planners`` and ``--perturbation`` select cells.
+(also ``hsi bench pick_place``); ``--robots``, ``--planners`` and ``--perturbation`` select cells;
+``--merge A/pick_place.json B/pick_place.json --out DIR`` writes one report of cells run separately.
 """
 
 from __future__ import annotations
@@ -103,13 +104,62 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--checkpoint", type=Path, default=REPO / "models" / "planner.pt")
     parser.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results")
     parser.add_argument("--verbose", action="store_true")
+    parser.add_argument(
+        "--merge",
+        nargs="+",
+        type=Path,
+        metavar="JSON",
+        help="write one report of earlier runs' pick_place.json files (cells run separately) and exit",
+    )
     return parser
+
+
+def merge(paths: list[Path], out: Path) -> dict[str, Any]:
+    """One report (``pick_place.{json,md,png}`` in ``out``) of the episodes of earlier runs' JSON files.
+
+    Raises:
+        SystemExit: a file is missing, or the runs used different layout seeds (not the same cases).
+    """
+    from _pick_place_report import finite, markdown, plot, summarize
+
+    runs = []
+    for path in paths:
+        if not path.is_file():
+            raise SystemExit(f"--merge: {path} not found (a pick_place.json of an earlier run)")
+        runs.append(json.loads(path.read_text()))
+    seeds = {r["seed"] for r in runs}
+    if len(seeds) != 1:
+        raise SystemExit(
+            f"--merge: the runs used different layout seeds {sorted(seeds)}; merge runs of one seed"
+        )
+    rows = [row for r in runs for row in r["rows"]]
+    results: dict[str, Any] = {
+        "command": " + ".join(r["command"].strip() for r in runs),
+        "seed": runs[0]["seed"],
+        "cases": max(r["cases"] for r in runs),
+        "episodes": len(rows),
+        "workers": max(r["workers"] for r in runs),
+        "cells": [c for r in runs for c in r["cells"]],
+        "templates": sorted({t for r in runs for t in r["templates"]}),
+        "wall_time_s": sum(r["wall_time_s"] for r in runs),
+        "summary": summarize(rows),
+        "rows": rows,
+    }
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "pick_place.json").write_text(json.dumps(finite(results), indent=1, allow_nan=False) + "\n")
+    (out / "pick_place.md").write_text(markdown(results))
+    plot(out / "pick_place.png", results, rows)
+    return results
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = _parser()
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING)
+    if args.merge:
+        merged = merge(args.merge, args.out)
+        print(f"wrote {args.out}/pick_place.{{json,md,png}} ({merged['episodes']} episodes)")
+        return 0
     os.environ.setdefault("MUJOCO_GL", "egl")
     if args.seed < TEST_SEED_START:
         parser.error(f"--seed must be ≥ {TEST_SEED_START}: lower seeds are used for training")

@@ -104,3 +104,27 @@ def test_quick_run_writes_the_tables(repo_root: Path, tmp_path: Path) -> None:
     assert set(summary["cells"]) == {"dual_ur5e/implicit/plain", "dual_ur5e/implicit/perturbed"}
     target = summary["targets"]["dual_ur5e_success"]
     assert target["target"] == 0.9 and isinstance(target["met"], bool)
+    _check_merge(repo_root, tmp_path / "pick_place.json", tmp_path / "merged")
+
+
+def _check_merge(repo_root: Path, run: Path, out: Path) -> None:
+    """``--merge`` of two runs writes one report of all their episodes; runs of other seeds are refused."""
+    script = [sys.executable, str(repo_root / "benchmarks" / "pick_place.py")]
+
+    def merge(*paths: Path) -> subprocess.CompletedProcess[str]:
+        argv = [*script, "--merge", *map(str, paths), "--out", str(out)]
+        return subprocess.run(argv, capture_output=True, text=True, check=False)
+
+    done = merge(run, run)
+    assert done.returncode == 0, done.stderr[-2000:]
+    merged = json.loads((out / "pick_place.json").read_text())
+    single = json.loads(run.read_text())
+    assert merged["episodes"] == 2 * single["episodes"] == len(merged["rows"])
+    assert merged["summary"]["cells"].keys() == single["summary"]["cells"].keys()
+    assert "dual_ur5e/implicit/plain" in (out / "pick_place.md").read_text()
+    other = out / "other_seed.json"
+    other.write_text(json.dumps({**single, "seed": single["seed"] + 1}))
+    refused = merge(run, other)
+    assert refused.returncode != 0 and "different layout seeds" in refused.stderr
+    missing = merge(out / "none.json")
+    assert missing.returncode != 0 and "not found" in missing.stderr
