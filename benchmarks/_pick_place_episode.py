@@ -8,8 +8,10 @@ on arm links, the target moved up to 5 cm before its grasp) and a re-plan hook. 
 re-plans like the pipeline does (the layout with the object at its new place is re-observed, the task
 re-resolved and re-scheduled, then turned into a robot trajectory by the pipeline's ``robot_trajectory``),
 finds the moment of the new trajectory closest to the robot's current configuration and continues from
-there after a short joint-space blend. Pushes are not re-planned (the controller recovers). The wrapper
-goes away when ``run_task`` takes a perturbation config.
+there after a short joint-space blend. The re-plan keeps the executed plan's grasping hand, and one whose
+gripper events contradict what the hands hold at that moment (a hand holding the door told to grasp the
+object) is not taken: the executed plan goes on. Pushes are not re-planned (the controller recovers).
+The wrapper goes away when ``run_task`` takes a perturbation config.
 
 IK time: ``trajectory.meta`` of the retargeting (``ik_time_s`` over ``frames``: per-frame differential IK,
 joint smoothing and residuals of the initial plan; re-plans are reported separately).
@@ -22,7 +24,7 @@ import dataclasses
 import logging
 import math
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from typing import Any
 
 import numpy as np
@@ -37,7 +39,7 @@ from hsi_nodes.demo.pipeline import (
     run_task,
 )
 from hsi_nodes.demo.tasks import DemoTask
-from hsi_planning.errors import HsiError
+from hsi_planning.errors import HsiError, RetargetError
 from hsi_planning.perception import CloudConfig, LabelledCloud
 from hsi_planning.planning import Planner
 from hsi_planning.scene import SceneSpec
@@ -128,6 +130,28 @@ def join(new: Any, q_now: np.ndarray, t_now: float, world: Any) -> Any:
     return JointTrajectory(new.robot, times, qs, new.joint_names, events, meta, new.floating_index)
 
 
+def grasping_hand(trajectory: Any, target: str) -> str:
+    """The hand a trajectory grasps ``target`` with: ``left``, ``right``, ``both``, or '' (none)."""
+    hands = sorted({e.hand for e in trajectory.events if e.kind == "grasp" and e.object_name == target})
+    return "both" if len(hands) == 2 else (hands[0] if hands else "")
+
+
+def grasp_conflict(events: Sequence[Any], held: dict[str, str]) -> str:
+    """Why a re-plan's gripper ``events`` (from now on) cannot follow the grasps the hands hold now
+    (``held``: hand -> body), or '' when they can: a hand holding a body releases it before it grasps
+    another, and a hand holding nothing has nothing to release."""
+    for hand in ("left", "right"):
+        mine = sorted((e for e in events if e.hand == hand), key=lambda e: e.time)
+        if not mine:
+            continue
+        first = mine[0]
+        if hand in held and first.kind == "grasp" and first.object_name != held[hand]:
+            return f"the re-plan's {hand} hand grasps {first.object_name} while it holds {held[hand]}"
+        if hand not in held and first.kind == "release":
+            return f"the re-plan's {hand} hand releases {first.object_name or 'a grasp'} but holds nothing"
+    return ""
+
+
 @contextlib.contextmanager
 def perturbed_execution(
     case: Case, planner: Planner, cfg: PipelineConfig, seed: int, record: dict[str, Any]
@@ -141,6 +165,7 @@ def perturbed_execution(
     original = sim_check.execute
     task = demo_task(case)
     record.update(events=[], replans=0, replan_wall_s=0.0, replan_errors=[], replan_ik_fps=[])
+    roles = {"hand": ""}  #: the executed plan's grasping hand, kept by a re-plan
 
     def hook(world: Any, event: Any, start: float) -> Any:
         if not isinstance(event, TargetMove):
@@ -148,9 +173,13 @@ def perturbed_execution(
         t0 = time.perf_counter()
         try:
             spec = moved_spec(case.spec, event.object_name, np.asarray(event.offset))
-            new = _plan_trajectory(task, spec, planner, cfg)
+            new = _plan_trajectory(dataclasses.replace(task, hand=roles["hand"]), spec, planner, cfg)
             t_now = world.time - start
             joined = join(new, world.robot_q(), t_now, world)
+            held = {h: body for (h, body), eq in world.welds.items() if world.data.eq_active[eq]}
+            conflict = grasp_conflict(joined.events, held)
+            if conflict:  # the executed plan goes on (the target moved at most a few cm)
+                raise RetargetError(f"re-plan not taken: {conflict}")
         except HsiError as exc:
             record["replan_errors"].append(f"{type(exc).__name__}: {exc}")
             _LOG.info("%s: re-plan failed: %s", case.tag, exc)
@@ -164,6 +193,7 @@ def perturbed_execution(
     def execute(world: Any, trajectory: Any, config: Any = None, **kwargs: Any) -> Any:
         goal = kwargs.get("goal")
         target = goal.object_name if goal is not None else ""
+        roles["hand"] = grasping_hand(trajectory, target)
         events = random_perturbations(world, trajectory, PerturbationConfig(seed=seed), target=target)
         record["events"] = [event_dict(e) for e in events]
         start = world.time

@@ -128,3 +128,31 @@ def _check_merge(repo_root: Path, run: Path, out: Path) -> None:
     assert refused.returncode != 0 and "different layout seeds" in refused.stderr
     missing = merge(out / "none.json")
     assert missing.returncode != 0 and "not found" in missing.stderr
+
+
+def test_a_replan_must_follow_what_the_hands_hold(repo_root: Path) -> None:
+    from hsi_retarget.joint_trajectory import ContactEvent
+
+    sys.path.insert(0, str(repo_root / "benchmarks"))
+    try:
+        import _pick_place_episode as episode
+    finally:
+        sys.path.remove(str(repo_root / "benchmarks"))
+    door, bottle = "cabinet1/door1", "bottle2"
+    opens_then_grasps = [  # right opens and holds the door, left grasps, right closes the door
+        ContactEvent(1.0, "right", "grasp", door),
+        ContactEvent(3.0, "left", "grasp", bottle),
+        ContactEvent(5.0, "right", "release", door),
+    ]
+
+    class _Traj:
+        events = opens_then_grasps
+
+    assert episode.grasping_hand(_Traj(), bottle) == "left" and episode.grasping_hand(_Traj(), "mug1") == ""
+    assert episode.grasp_conflict(opens_then_grasps, {}) == ""  # before anything is held
+    assert episode.grasp_conflict(opens_then_grasps[1:], {"right": door}) == ""  # joined after the door grasp
+    swapped = [ContactEvent(3.0, "right", "grasp", bottle), ContactEvent(5.0, "left", "release", door)]
+    assert episode.grasp_conflict(swapped, {"right": door})
+    why = episode.grasp_conflict(swapped[:1], {"right": door})
+    assert "right hand grasps bottle2 while it holds cabinet1/door1" in why
+    assert "left hand releases" in episode.grasp_conflict(swapped[1:], {"right": door})
