@@ -23,6 +23,8 @@ from hsi_planning.planning import Planner, PlanRequest, PlanResult
 from hsi_planning.scheduler import Schedule
 from hsi_planning.trajectory import WristTrajectory
 
+OVERLAY_WALL_TIME = 10.0  #: [s] IPOPT wall-time limit per attempt of the comparison's min-jerk plans
+
 __all__ = ["MinJerkPath", "RecordingPlanner", "learned_requests", "minjerk_comparison"]
 
 _log = logging.getLogger(__name__)
@@ -100,9 +102,12 @@ def minjerk_comparison(
         The minimum-jerk paths, one per matched segment, and one message per failure (a segment without
         a recorded request, or the baseline failing on it).
     """
-    from hsi_planning.minjerk import MinJerkPlanner
+    from hsi_planning.minjerk import MinJerkPlanner, MinJerkPlannerConfig
+    from hsi_planning.minjerk.optimizer import MinJerkConfig
 
-    planner = MinJerkPlanner()
+    # The comparison is drawn after the task, so IPOPT gets more time than a planning call: on a slow or
+    # busy machine 3 s per attempt was not enough for a carrying leave.
+    planner = MinJerkPlanner(MinJerkPlannerConfig(optimizer=MinJerkConfig(max_wall_time=OVERLAY_WALL_TIME)))
     matched = learned_requests(schedule, calls)
     errors = [
         f"segment {i} ({s.trajectory.hand} {s.trajectory.segment}): no recorded learned plan"
