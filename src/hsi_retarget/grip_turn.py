@@ -60,9 +60,10 @@ class GripTurnConfig:
     turn_s: float = 1.0  #: [s] shortest time the turn eases in before a grasp and out after a release
 
     def __post_init__(self) -> None:
-        if not (0.0 <= self.opening < 0.5 and 0.0 <= self.clearance < max(0.5 * self.opening, 0.5)):
+        half = 0.5 * (self.opening or DEFAULT_OPENING)
+        if not (0.0 <= self.opening < 0.5 and 0.0 <= self.clearance < half):
             raise ConfigError(
-                f"GripTurnConfig: opening in [0, 0.5) m and clearance in [0, opening/2) m, got "
+                f"GripTurnConfig: opening in [0, 0.5) m (0: the robot's), clearance in [0, opening/2) m, got "
                 f"{self.opening}, {self.clearance}"
             )
         if not 0.1 <= self.step_deg <= 45.0:

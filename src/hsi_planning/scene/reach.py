@@ -123,7 +123,7 @@ def exposing_fraction(spec: SceneSpec, target: str, least: float, most: float, m
     """
     if not (0.0 < least <= most <= 1.0) or margin < 0.0:
         raise ConfigError(
-            f"exposing_fraction: need 0 < least <= most <= 1 and margin >= 0, got {least}, {most}"
+            f"exposing_fraction: need 0 < least <= most <= 1 and margin >= 0 m, got {least}, {most}, {margin}"
         )
     o = spec.object_by_name(target)
     support = support_surface(spec, o.on)
