@@ -8,7 +8,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from hsi_planning.implicit.completion import class_height, completed_bounds, top_seen
-from hsi_planning.implicit.scene_completion import PANEL, complete_cloud
+from hsi_planning.implicit.scene_completion import PANEL, complete_cloud, round_bounds
 from hsi_planning.perception import LabelledCloud
 from hsi_planning.planning import PlanRequest
 
@@ -99,6 +99,23 @@ def test_a_round_object_seen_from_one_side_gets_its_far_side() -> None:
     far_side = np.array([[0.8 + 0.033, 0.0, 0.66], [0.8 + 0.02, 0.02, 0.66]])
     assert (cKDTree(can).query(far_side)[0] > 0.02).all()
     assert (cKDTree(out[lab == 3]).query(far_side)[0] <= 0.012).all()
+
+
+def test_the_held_box_of_a_round_object_seen_by_a_sliver_covers_its_cylinder() -> None:
+    rng = np.random.default_rng(4)
+    angle = rng.uniform(-0.35 * np.pi, 0.35 * np.pi, 200)  # the inner back wall of a packed mug
+    z = rng.uniform(0.45, 0.53, 200)
+    radius, centre = 0.039, np.array([0.5, 0.02])
+    rim = np.column_stack([centre[0] + radius * np.cos(angle), centre[1] + radius * np.sin(angle), z])
+    box = (rim.min(axis=0), rim.max(axis=0))
+    assert box[1][0] - box[0][0] < 0.025  # the visible box misses most of the body
+    lo, hi = round_bounds(rim, "mug", box)
+    assert lo[:2] == pytest.approx(centre - radius, abs=0.006)
+    assert hi[:2] == pytest.approx(centre + radius, abs=0.006)
+    assert (lo[2], hi[2]) == (box[0][2], box[1][2])  # heights as completed before
+    assert lo is not box[0]
+    same = round_bounds(rim, "box", box)  # not a round class: unchanged
+    assert np.array_equal(same[0], box[0]) and np.array_equal(same[1], box[1])
 
 
 def test_excluded_labels_and_clouds_without_classes_are_left_as_observed() -> None:

@@ -59,6 +59,7 @@ from hsi_planning.implicit.runtime_field import (
     free_lift,
     remaining_time,
 )
+from hsi_planning.implicit.scene_completion import round_bounds
 from hsi_planning.implicit.segment import SegmentPlan, plan_segment
 from hsi_planning.implicit.train import Checkpoint, load_checkpoint
 from hsi_planning.perception.cloud import LabelledCloud
@@ -248,6 +249,8 @@ class ImplicitPlanner:
         furniture = furniture_mask(labels, request.cloud.label_classes, ids)
         kind = (request.cloud.label_classes or {}).get(ids[0])
         held = completed_bounds(target_pts, points[furniture], kind, points[~is_target])
+        if cfg.round_completion:
+            held = round_bounds(target_pts, kind, held)
         ctx = SegmentContext(
             fields=fields,
             clearance=clearance,

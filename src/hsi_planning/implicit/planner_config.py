@@ -30,6 +30,11 @@ class ImplicitPlannerConfig:
     repair_margin_step: float = 0.01  #: [m] growth of the margin per repair retry
     clearance_relax: float = 0.10  #: [m] arc length before the contact over which clearance relaxes
     check_margin: float = 0.0075  #: [m] extra clearance the final path keeps from the observed points
+    #: [m] when no attempt keeps the full clearance, the closest one is still returned (logged) if it
+    #: misses it by at most this much (the hand sphere itself, without ``check_margin``, stays clear)
+    relaxed_margin: float = 0.0075
+    #: [-] grow a round held object's box to the cylinder fitted through its visible points
+    round_completion: bool = True
     carried_padding: float = 0.01  #: [m] growth of the held object's bounding box (points lie inside it)
     carried_margin: float = 0.004  #: [m] clearance the padded box keeps on the final path (half at the lift)
     start_clearance: float = 0.01  #: [m] a start this close to an obstacle point counts as inside it
@@ -94,6 +99,7 @@ class ImplicitPlannerConfig:
             "carried_padding",
             "carried_margin",
             "check_margin",
+            "relaxed_margin",
             "start_clearance",
             "path_smoothing",
             "speed_smoothing",

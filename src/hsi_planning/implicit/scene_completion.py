@@ -82,6 +82,19 @@ def fit_round(own: F64, width: float) -> tuple[F64, float]:
     return centre, radius
 
 
+def round_bounds(own: F64, kind: str | None, box: tuple[F64, F64]) -> tuple[F64, F64]:
+    """(lo (3,), hi (3,)) [m] ``box`` grown horizontally to the upright cylinder :func:`fit_round` fits
+    through ``own`` (N, 3) [m], the visible points of a round object of class ``kind`` (its hidden side:
+    the cameras see a packed mug's rim or a bottle's front only); other classes' boxes as they are."""
+    if kind not in ROUND_KINDS or own.shape[0] < 3:
+        return box
+    centre, radius = fit_round(own, DEFAULTS[kind].size[0])
+    lo, hi = box[0].copy(), box[1].copy()
+    lo[:2] = np.minimum(lo[:2], centre - radius)
+    hi[:2] = np.maximum(hi[:2], centre + radius)
+    return lo, hi
+
+
 def _circle(xy: F64) -> tuple[F64, float] | None:
     """Algebraic (Kasa) circle fit of ``xy`` (N, 2) [m]: centre (2,), radius [m]; ``None`` if degenerate."""
     if len(xy) < 3:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import logging
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -41,6 +42,7 @@ from hsi_planning.trajectory import WristTrajectory
 __all__ = ["SegmentContext", "SegmentPlan", "plan_segment"]
 
 F64 = NDArray[np.float64]
+_LOG = logging.getLogger(__name__)
 #: [-] growth of the time corridor of Eq. 11's candidates when none in it connects (repaired fields).
 _WIDE_CAP = 3.0
 
@@ -166,6 +168,13 @@ def _always(x: F64) -> NDArray[np.bool_]:
     return np.ones(x.shape[0], dtype=bool)
 
 
+def _descends_from(grid: Any, phi: F64, x: F64, far: float) -> bool:
+    """Whether ``x`` (3,) [m] lies in the grid with a finite time on its node (a path leads from it)."""
+    if not bool(grid.contains(x[None])[0]):
+        return False
+    return bool(phi[tuple(grid.index(x[None])[0])] < far)
+
+
 def _field_speed(grid: Any, phi: F64, far: float, points: F64) -> F64:
     """(N,) [m/s] speed 1/|∇φ| of a time field at ``points`` (N, 3) inside the grid."""
     grad = grid.gradient(descent_potential(phi, far))
@@ -191,7 +200,8 @@ def _descend(
     connection, else straight up first and then straight over: a drawer front or board in the way),
     else at the start point. Eq. 11's candidates lie in the prior's time corridor; unless
     ``capped``, a corridor ``_WIDE_CAP`` times as long is tried when none of them connects (a repaired
-    field's times grow slowly off the corridor)."""
+    field's times grow slowly off the corridor), and when none of those does either, the descent starts
+    at the anchor itself (the repaired field leads through the free nodes from wherever it is finite)."""
     cfg, fs = ctx.config, ctx.fields
     grid, far = fs.grid, fs.config.unreachable_time
     flat = phi.reshape(-1)
@@ -201,6 +211,7 @@ def _descend(
     lift = ctx.lift
     caps = (cap,) if capped else (cap, _WIDE_CAP * cap)
     tries = [(c, up) for up in ((False, True) if connect else (False,)) for c in caps]
+    at_anchor = False
     for k, (c, up) in enumerate(tries):
         clear = _connect_clear(ctx, anchor, lift > 0.0, margin, up) if connect else _always
         cand = np.flatnonzero((flat < min(c, far)) & free.reshape(-1))
@@ -208,8 +219,12 @@ def _descend(
             start = points[cand[select_start(points[cand], flat[cand], anchor, mean_speed, clear)]]
             break
         except PlanningError:
-            if k == len(tries) - 1:
+            if k < len(tries) - 1:
+                continue
+            # A repaired field leads through free space from wherever it is finite: start at the anchor.
+            if capped or not connect or not _descends_from(grid, phi, anchor, far):
                 raise
+            start, at_anchor = np.array(anchor, dtype=np.float64), True
     descent = DescentConfig(
         step=cfg.descent_step, stop_radius=max(lift, cfg.descent_step), max_steps=cfg.max_descent_steps
     )
@@ -228,8 +243,8 @@ def _descend(
             "(local minimum of the remaining-time field)"
         )
     tail = [ctx.contact + np.array([0.0, 0.0, lift])] if lift > 0.0 else []
-    head = [anchor[None]] if connect else []
-    if connect and up and start[2] > anchor[2]:
+    head = [anchor[None]] if connect and not at_anchor else []
+    if connect and up and not at_anchor and start[2] > anchor[2]:
         head.append(_waypoint(anchor, start[None]))
     path = np.vstack([*head, *(p for _, p in parts), *tail, ctx.contact[None]])
     speeds = [np.full(len(head), mean_speed)]
@@ -255,7 +270,8 @@ def plan_segment(
     (approach order: starts) at the selected start point x_s.
 
     Tried in order until the path keeps its clearance: the learned field, then (``repair`` =
-    ``fallback``) the repaired field with ``repair_retries`` growing safety margins.
+    ``fallback``) the repaired field with ``repair_retries`` growing safety margins. When none keeps it,
+    the closest one is returned (``info["relaxed"]``, logged) if it misses by at most ``relaxed_margin``.
     """
     cfg = ctx.config
     t0 = time.perf_counter()
@@ -266,6 +282,7 @@ def plan_segment(
         "always": [("repaired", m) for m in margins],
     }[cfg.repair]
     error: PlanningError | None = None
+    best: _Found | None = None
     failures: list[str] = []
     lifted = dataclasses.replace(ctx, lift=ctx.lift if carrying else 0.0)
     free_at = wrist_free(lifted, carrying=carrying)
@@ -308,25 +325,56 @@ def plan_segment(
         )
         tt, pos = resample_uniform(t, path, cfg.sample_rate)
         clear, where = _violation(pos, lifted, carrying)
+        share = learned_length / max(float(arc_length(raw)[-1]), 1e-9)
+        found = _Found(clear, kind, margin, tt, pos, share)
         if clear < 0.0:
             error = PlanningError(
                 f"no collision-free path: the {kind} one brings {where} "
                 f"{-clear:.3f} m too close to an obstacle"
             )
             failures.append(f"{kind} (margin {margin:.3f} m): {error}")
+            best = found if best is None or clear > best.clear else best
             continue
-        pp = prior.position if prior.segment == "approach" else prior.position[::-1]
-        pq = prior.quaternion if prior.segment == "approach" else prior.quaternion[::-1]
-        quat = transfer_orientation(pp, pq, pos, cfg.blend_fraction)
-        share = learned_length / max(float(arc_length(raw)[-1]), 1e-9)
-        info = {
-            "field": "hybrid" if kind == "learned" and share < 0.999 else kind,
-            "learned_share": share,
-            "margin": margin,
-            "clearance_margin": clear,
-            "length": float(arc_new[-1]),
-            "failed_attempts": failures,
-        }
-        return SegmentPlan(tt, pos, quat, info, {"path": time.perf_counter() - t0})
+        return _finish(found, prior, cfg.blend_fraction, failures, t0)
+    if best is not None and best.clear >= -cfg.relaxed_margin:
+        _LOG.warning(
+            "no path keeps the full clearance; taking the %s one %.1f mm short of it (relaxed_margin "
+            "%.1f mm)",
+            best.kind,
+            -1e3 * best.clear,
+            1e3 * cfg.relaxed_margin,
+        )
+        return _finish(best, prior, cfg.blend_fraction, failures, t0)
     assert error is not None
     raise PlanningError("no collision-free path; tried " + "; ".join(failures)) from error
+
+
+@dataclass(frozen=True, eq=False)
+class _Found:
+    """A timed candidate path (approach order) and its clearance against the required one [m]."""
+
+    clear: float
+    kind: str
+    margin: float
+    t: F64
+    position: F64
+    share: float
+
+
+def _finish(
+    found: _Found, prior: WristTrajectory, blend: float, failures: list[str], t0: float
+) -> SegmentPlan:
+    """The segment plan of ``found`` with the orientation transferred from ``prior``."""
+    pp = prior.position if prior.segment == "approach" else prior.position[::-1]
+    pq = prior.quaternion if prior.segment == "approach" else prior.quaternion[::-1]
+    quat = transfer_orientation(pp, pq, found.position, blend)
+    info = {
+        "field": "hybrid" if found.kind == "learned" and found.share < 0.999 else found.kind,
+        "learned_share": found.share,
+        "margin": found.margin,
+        "clearance_margin": found.clear,
+        "relaxed": found.clear < 0.0,
+        "length": float(arc_length(found.position)[-1]),
+        "failed_attempts": failures,
+    }
+    return SegmentPlan(found.t, found.position, quat, info, {"path": time.perf_counter() - t0})
