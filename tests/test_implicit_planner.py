@@ -7,6 +7,7 @@ runs the benchmark on a few unseen layouts with the committed checkpoint ``model
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import subprocess
 import sys
@@ -233,6 +234,20 @@ def test_plan_reaches_the_contact_collision_free(planner: ImplicitPlanner, hand:
     assert set(result.timings) >= {"fields", "fit_approach", "path_approach", "path_leave", "total"}
     assert result.timings["total"] > 0.0
     json.dumps(result.to_dict())
+
+
+def test_a_path_short_of_the_clearance_is_returned_only_within_relaxed_margin(checkpoint: Path) -> None:
+    cloud = scene_cloud()
+    strict = ImplicitPlannerConfig(fit_steps=5, check_margin=0.4, relaxed_margin=0.0)  # no path keeps it
+    with pytest.raises(PlanningError, match="no collision-free path"):
+        ImplicitPlanner(checkpoint, strict).plan(cloud, "can", "right", "grasp", START["right"])
+    loose = dataclasses.replace(strict, relaxed_margin=0.45)
+    result = ImplicitPlanner(checkpoint, loose).plan(cloud, "can", "right", "grasp", START["right"])
+    info = result.info["path_approach"]
+    assert info["relaxed"] and -0.45 <= info["clearance_margin"] < 0.0
+    assert info["failed_attempts"]  # every attempt was tried first
+    default = ImplicitPlanner(checkpoint, ImplicitPlannerConfig(fit_steps=5))
+    assert not default.plan(cloud, "can", "right", "grasp", START["right"]).info["path_approach"]["relaxed"]
 
 
 def test_plan_request_form_and_make_planner(checkpoint: Path) -> None:
