@@ -250,6 +250,35 @@ def test_a_path_short_of_the_clearance_is_returned_only_within_relaxed_margin(ch
     assert not default.plan(cloud, "can", "right", "grasp", START["right"]).info["path_approach"]["relaxed"]
 
 
+def test_the_lift_stops_under_a_board_above_the_held_object_not_beside_a_packed_neighbour() -> None:
+    from hsi_planning.implicit.runtime_field import box_samples, free_lift
+
+    contact = np.array([0.44, 0.0, 0.6])  # wrist in front of a 20 cm bottle (top at 0.70)
+    held = box_samples(np.array([[0.47, -0.03, 0.5], [0.53, 0.03, 0.7]]), 0.01) - contact
+    ys, zs = np.meshgrid(np.arange(-0.1, 0.1, 0.005), np.arange(0.5, 0.75, 0.005))
+    wall = np.column_stack([np.full(ys.size, 0.546), ys.ravel(), zs.ravel()])  # 6 mm beside the box
+    floor = np.column_stack([np.random.default_rng(0).uniform(0.3, 0.7, (400, 2)), np.full(400, 0.5)])
+
+    def lift(points: np.ndarray) -> float:
+        clearance = Clearance(points)
+        ctx = SegmentContext(
+            fields=None,  # type: ignore[arg-type]  # not used by free_lift
+            clearance=clearance,
+            contact=contact,
+            contact_clear=float(clearance(contact)[0]),
+            carried=held,
+            lift=0.0,
+            config=ImplicitPlannerConfig(),
+        )
+        return free_lift(ctx, points, 0.15, 0.0075)
+
+    assert lift(np.vstack([wall, floor])) == pytest.approx(0.15)  # a packed neighbour does not stop it
+    xs, ys = np.meshgrid(np.arange(0.3, 0.7, 0.01), np.arange(-0.2, 0.2, 0.01))
+    board = np.column_stack([xs.ravel(), ys.ravel(), np.full(xs.size, 0.75)])  # 4 cm over the bottle
+    room = 0.75 - 0.71 - 0.0075  # under the board, less the margin (box padded by 1 cm)
+    assert room - 0.005 <= lift(np.vstack([wall, floor, board])) <= room
+
+
 def test_plan_request_form_and_make_planner(checkpoint: Path) -> None:
     planner = make_planner("implicit", checkpoint, fit_steps=5)
     request = PlanRequest(cloud=scene_cloud(), target="can", hand="right", start_position=START["right"])

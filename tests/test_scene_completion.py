@@ -114,6 +114,14 @@ def test_the_held_box_of_a_round_object_seen_by_a_sliver_covers_its_cylinder() -
     assert hi[:2] == pytest.approx(centre + radius, abs=0.006)
     assert (lo[2], hi[2]) == (box[0][2], box[1][2])  # heights as completed before
     assert lo is not box[0]
+    # A neighbour standing where the fit puts the body: the arc's other side (mirror image) is taken.
+    gx, gy = np.meshgrid(np.arange(0.47, 0.53, 0.01), np.arange(-0.01, 0.05, 0.01))
+    neighbour = np.column_stack([gx.ravel(), gy.ravel(), np.full(gx.size, 0.5)])
+    lo, hi = round_bounds(rim, "mug", box, neighbour)
+    mirror = 2.0 * rim[:, :2].mean(axis=0) - centre
+    assert lo[:2] == pytest.approx(np.minimum(box[0][:2], mirror - radius), abs=0.006)
+    assert hi[:2] == pytest.approx(np.maximum(box[1][:2], mirror + radius), abs=0.006)
+    assert hi[0] > centre[0] + radius + 0.01  # grown away from the neighbour
     same = round_bounds(rim, "box", box)  # not a round class: unchanged
     assert np.array_equal(same[0], box[0]) and np.array_equal(same[1], box[1])
 

@@ -250,7 +250,7 @@ class ImplicitPlanner:
         kind = (request.cloud.label_classes or {}).get(ids[0])
         held = completed_bounds(target_pts, points[furniture], kind, points[~is_target])
         if cfg.round_completion:
-            held = round_bounds(target_pts, kind, held)
+            held = round_bounds(target_pts, kind, held, points[~is_target])
         ctx = SegmentContext(
             fields=fields,
             clearance=clearance,
@@ -263,7 +263,7 @@ class ImplicitPlanner:
         )
         rise = clear_lift(points[~is_target], contact, ctx.carried, cfg.lift_pad, cfg.check_margin)
         lift = min(max(cfg.lift_height, rise), cfg.max_lift)
-        ctx = dataclasses.replace(ctx, lift=free_lift(ctx, lift, cfg.check_margin))
+        ctx = dataclasses.replace(ctx, lift=free_lift(ctx, points[~is_target], lift, cfg.check_margin))
         plans: dict[str, SegmentPlan] = {}
         info: dict[str, Any] = {
             "approach_axis": np.asarray(axis).tolist(),

@@ -32,14 +32,14 @@ from hsi_planning.trajectory import WristTrajectory
 F64 = NDArray[np.float64]
 #: [m] height above the held box's bottom from which its points count as "upper" (lift checks).
 _UPPER = 0.02
+#: [m] horizontal cell size of the columns :func:`free_lift` tells walls from ceilings by.
+_COLUMN = 0.025
 #: [m] the held box's clearance is searched up to this far (every check needs far less).
 _CARRIED_BOUND = 0.05
 #: [-] z component of an approach axis that reaches down into a container (drawer, box, counter).
 TOP_DOWN = 0.7
 #: [m] around such a contact the wrist stays above the contact's height (the unseen rim and bottom).
 UNDER_RADIUS = 0.3
-#: [m] how much a lifted box's sampled clearance may fall below its start (face samples vs cloud points).
-_LIFT_NOISE = 0.004
 #: Share of ``clearance_relax`` used for the free-node mask (distance to the contact < path length).
 _MASK_RELAX = 0.7
 
@@ -263,16 +263,27 @@ def clear_lift(obstacle_points: F64, contact: F64, carried: F64, pad: float, mar
     return float(max(0.0, pts[near, 2].max() - lo[2] + margin)) if near.any() else 0.0
 
 
-def free_lift(ctx: SegmentContext, lift: float, margin: float, step: float = 0.005) -> float:
-    """[m] the largest vertical lift ≤ ``lift`` of the held object from the contact that keeps its upper
-    part ``margin`` [m] clear of the observed obstacles (a shelf board or lid right above it; or as clear
-    as it starts, next to a packed neighbour) and the hand
-    sphere as clear as a path there must keep (relaxed towards the contact)."""
+def free_lift(
+    ctx: SegmentContext, obstacle_points: F64, lift: float, margin: float, step: float = 0.005
+) -> float:
+    """[m] the largest vertical lift ≤ ``lift`` of the held object from the contact that keeps the top of
+    its box ``margin`` [m] under the lowest of ``obstacle_points`` (K, 3) [m] above it within its
+    footprint (a shelf board or lid right above it; walls and neighbours beside it, whose points also
+    stand below its top, do not stop a vertical lift)
+    and the hand sphere as clear as a path there must keep (relaxed towards the contact)."""
     cfg = ctx.config
     heights = np.arange(step, lift + 1e-9, step)
     wrist = ctx.contact + heights[:, None] * np.array([0.0, 0.0, 1.0])
-    clear = ctx.carried_clearance(wrist, upper=True)
-    start = float(ctx.carried_clearance(ctx.contact[None], upper=True)[0])  # neighbours beside it stay
+    lo, hi = ctx.contact + ctx.carried.min(axis=0), ctx.contact + ctx.carried.max(axis=0)
+    pts = np.asarray(obstacle_points, dtype=np.float64).reshape(-1, 3)
+    pts = pts[(pts[:, :2] >= lo[:2]).all(axis=1) & (pts[:, :2] <= hi[:2]).all(axis=1)]
+    # A wall or neighbour the (padded) footprint overlaps also stands beside the box, below its top: its
+    # columns (``_COLUMN`` cells) are not a ceiling.
+    cells = np.floor(pts[:, :2] / _COLUMN).astype(np.int64)
+    beside = (pts[:, 2] <= hi[2]) & (pts[:, 2] >= lo[2] + _UPPER)
+    walls = np.isin(cells @ np.array([1, 1 << 32]), (cells[beside] @ np.array([1, 1 << 32])))
+    over = (pts[:, 2] > hi[2]) & ~walls
+    room = float(pts[over, 2].min() - hi[2] - margin) if over.any() else np.inf
     need = required_clearance(heights, cfg.hand_radius + margin, ctx.contact_clear, cfg.clearance_relax)
-    blocked = np.flatnonzero((clear < min(margin, start - _LIFT_NOISE)) | (ctx.clearance(wrist) < need))
+    blocked = np.flatnonzero((heights > room) | (ctx.clearance(wrist) < need))
     return float(lift if blocked.shape[0] == 0 else heights[blocked[0]] - step)

@@ -82,13 +82,29 @@ def fit_round(own: F64, width: float) -> tuple[F64, float]:
     return centre, radius
 
 
-def round_bounds(own: F64, kind: str | None, box: tuple[F64, F64]) -> tuple[F64, F64]:
+def round_bounds(
+    own: F64, kind: str | None, box: tuple[F64, F64], obstacle_points: F64 | None = None
+) -> tuple[F64, F64]:
     """(lo (3,), hi (3,)) [m] ``box`` grown horizontally to the upright cylinder :func:`fit_round` fits
     through ``own`` (N, 3) [m], the visible points of a round object of class ``kind`` (its hidden side:
-    the cameras see a packed mug's rim or a bottle's front only); other classes' boxes as they are."""
+    the cameras see a packed mug's rim or a bottle's front only); other classes' boxes as they are.
+    A short arc does not tell the side its centre lies on: of the fitted centre and its mirror image
+    through the visible points' centre, the one whose cylinder holds fewer of ``obstacle_points``
+    (M, 3) [m] (over the box's height) is taken."""
     if kind not in ROUND_KINDS or own.shape[0] < 3:
         return box
     centre, radius = fit_round(own, DEFAULTS[kind].size[0])
+    if obstacle_points is not None and len(obstacle_points):
+        mid = own[:, :2].mean(axis=0)
+        op = np.asarray(obstacle_points, dtype=np.float64).reshape(-1, 3)
+        op = op[(op[:, 2] >= box[0][2]) & (op[:, 2] <= box[1][2]), :2]
+
+        def inside(c: F64) -> int:
+            return int((np.linalg.norm(op - c, axis=1) < radius).sum())
+
+        mirror = 2.0 * mid - centre
+        if inside(mirror) < inside(centre):
+            centre = mirror
     lo, hi = box[0].copy(), box[1].copy()
     lo[:2] = np.minimum(lo[:2], centre - radius)
     hi[:2] = np.maximum(hi[:2], centre + radius)
