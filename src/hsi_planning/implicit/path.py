@@ -23,6 +23,8 @@ from scipy.spatial import cKDTree
 from hsi_planning.errors import PlanningError
 
 F64 = NDArray[np.float64]
+#: [points] queries from which :class:`Clearance` searches on every core.
+_PARALLEL_QUERIES = 4096
 
 
 class Clearance:
@@ -39,7 +41,8 @@ class Clearance:
         p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         if self._tree is None:
             return np.full(p.shape[0], bound)
-        d, _ = self._tree.query(p, k=1, distance_upper_bound=bound)
+        workers = -1 if p.shape[0] >= _PARALLEL_QUERIES else 1  # threads pay off on large batches only
+        d, _ = self._tree.query(p, k=1, distance_upper_bound=bound, workers=workers)
         return np.asarray(np.minimum(d, bound), dtype=np.float64)
 
     def segments_clear(
