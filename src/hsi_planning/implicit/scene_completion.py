@@ -212,10 +212,13 @@ def complete_cloud(
     )
     added: list[F64] = []
     added_labels: list[NDArray[np.int64]] = []
+    order = np.argsort(lab, kind="stable")  # each label's points in cloud order, found by bisection
+    sorted_lab = lab[order]
     for label_id, cls in label_classes.items():
         if label_id in skip:
             continue
-        own = pts[lab == label_id]
+        a, b = np.searchsorted(sorted_lab, [label_id, label_id + 1])
+        own = pts[order[a:b]]
         if own.shape[0] < _MIN_POINTS:
             continue
         if region is not None and not ((own >= r_lo) & (own <= r_hi)).all(axis=1).any():
