@@ -210,7 +210,8 @@ class ImplicitPlanner:
         w = np.asarray(request.start_position, dtype=np.float64)
         is_target = np.isin(labels, ids)
         target_pts = points[is_target]
-        clearance = Clearance(points[~is_target])
+        obstacles = points[~is_target]  # (the cropped cloud is copied once, not per use)
+        clearance = Clearance(obstacles)
         axis = request.approach_axis
         if axis is None:
             axis = estimate_approach_axis(target_pts, clearance, w)
@@ -248,9 +249,9 @@ class ImplicitPlanner:
         # The held object reaches down to its support where neighbours hide its bottom (packed drawers).
         furniture = furniture_mask(labels, request.cloud.label_classes, ids)
         kind = (request.cloud.label_classes or {}).get(ids[0])
-        held = completed_bounds(target_pts, points[furniture], kind, points[~is_target])
+        held = completed_bounds(target_pts, points[furniture], kind, obstacles)
         if cfg.round_completion:
-            held = round_bounds(target_pts, kind, held, points[~is_target])
+            held = round_bounds(target_pts, kind, held, obstacles)
         ctx = SegmentContext(
             fields=fields,
             clearance=clearance,
@@ -261,9 +262,9 @@ class ImplicitPlanner:
             config=cfg,
             approach_axis=np.asarray(axis, dtype=np.float64),
         )
-        rise = clear_lift(points[~is_target], contact, ctx.carried, cfg.lift_pad, cfg.check_margin)
+        rise = clear_lift(obstacles, contact, ctx.carried, cfg.lift_pad, cfg.check_margin)
         lift = min(max(cfg.lift_height, rise), cfg.max_lift)
-        ctx = dataclasses.replace(ctx, lift=free_lift(ctx, points[~is_target], lift, cfg.check_margin))
+        ctx = dataclasses.replace(ctx, lift=free_lift(ctx, obstacles, lift, cfg.check_margin))
         plans: dict[str, SegmentPlan] = {}
         info: dict[str, Any] = {
             "approach_axis": np.asarray(axis).tolist(),

@@ -267,10 +267,10 @@ def free_lift(
     ctx: SegmentContext, obstacle_points: F64, lift: float, margin: float, step: float = 0.005
 ) -> float:
     """[m] the largest vertical lift ≤ ``lift`` of the held object from the contact that keeps the top of
-    its box ``margin`` [m] under the lowest of ``obstacle_points`` (K, 3) [m] above it within its
-    unpadded footprint (a shelf board or lid right above it; walls and neighbours beside it, whose points also
-    stand below its top, do not stop a vertical lift)
-    and the hand sphere as clear as a path there must keep (relaxed towards the contact)."""
+    its box ``margin`` [m] under the lowest of ``obstacle_points`` (K, 3) [m] above its unpadded
+    footprint (a shelf board or lid right above it; walls and neighbours beside it, whose points also
+    stand below its top, do not stop a vertical lift), and the hand sphere as clear as a path there
+    must keep (relaxed towards the contact)."""
     cfg = ctx.config
     heights = np.arange(step, lift + 1e-9, step)
     wrist = ctx.contact + heights[:, None] * np.array([0.0, 0.0, 1.0])
@@ -278,7 +278,7 @@ def free_lift(
     pts = np.asarray(obstacle_points, dtype=np.float64).reshape(-1, 3)
     pad = cfg.carried_padding  # over the object itself, not over its padding (where neighbours stand)
     pts = pts[(pts[:, :2] >= lo[:2] + pad).all(axis=1) & (pts[:, :2] <= hi[:2] - pad).all(axis=1)]
-    # A wall or neighbour the (padded) footprint overlaps also stands beside the box, below its top: its
+    # A wall or neighbour reaching into the footprint also has points beside the box, below its top: its
     # columns (``_COLUMN`` cells) are not a ceiling.
     cells = np.floor(pts[:, :2] / _COLUMN).astype(np.int64)
     beside = (pts[:, 2] <= hi[2]) & (pts[:, 2] >= lo[2] + _UPPER)
