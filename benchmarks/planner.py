@@ -28,7 +28,10 @@ labelled cloud and the approach axis from the spec. Checked against the **ground
   unsmoothness: mean |acceleration| [m/s²]; RMS curvature [1/m]; path length [m]; planning time.
 
 With ``--ablation PATH`` (default ``models/planner_2ch.pt`` when it exists) the same cases are planned
-with a 2-channel (t, toa) checkpoint. Writes ``<out>/planner.{json,md}``. ``--quick``: 6 layouts.
+with a 2-channel (t, toa) checkpoint, and with ``--paper PATH`` (default ``models/planner_paper.pt`` when
+it exists, made by ``hsi train planner --config config/planner_train_paper.yaml``) with the paper-size
+6 × 256 network (latent 128) next to the shipped smaller one; a second table lists each network's size,
+training data and training time. Writes ``<out>/planner.{json,md}``. ``--quick``: 6 layouts.
 
 Usage: ``python benchmarks/planner.py [--checkpoint models/planner.pt] [--layouts 60] [--quick]``
 """
@@ -50,6 +53,7 @@ from _common import CONTACT_TOLERANCE, REPO, Case, failed, make_cases, prepare, 
 from hsi_planning.errors import HsiError
 from hsi_planning.implicit.planner import ImplicitPlanner, ImplicitPlannerConfig
 from hsi_planning.implicit.problem import TEST_SEED_START
+from hsi_planning.implicit.train import load_checkpoint
 from hsi_planning.planning import PlanResult
 
 
@@ -105,6 +109,25 @@ def summarize(rows: list[dict[str, Any]]) -> dict[str, Any]:
     }
 
 
+def network(path: Path) -> dict[str, Any]:
+    """Architecture, parameter count, checkpoint size and training record of a planner checkpoint."""
+    ckpt = load_checkpoint(path)
+    arch = ckpt.model.config
+    train = ckpt.meta.get("train", {})
+    return {
+        "checkpoint": str(path.relative_to(REPO) if path.is_relative_to(REPO) else path),
+        "layers": arch.n_layers,
+        "width": arch.width,
+        "latent": arch.latent_dim,
+        "channels": list(arch.channels),
+        "parameters": int(sum(p.numel() for p in ckpt.model.parameters())),
+        "checkpoint_mb": path.stat().st_size / 1e6,
+        "samples": ckpt.meta.get("dataset", {}).get("samples"),
+        "build_s": train.get("build_seconds"),
+        "train_s": train.get("train_seconds"),
+    }
+
+
 def _stage_medians(rows: list[dict[str, Any]]) -> dict[str, float]:
     """Median [ms] of each planning stage over the planned rows (``timings`` of :func:`evaluate`)."""
     timed = [r["timings"] for r in rows if r.get("planned") and r.get("timings")]
@@ -138,6 +161,20 @@ def markdown(results: dict[str, Any]) -> str:
     ]
     for name, summary in results["models"].items():
         lines.append(f"| {name} | " + " | ".join(f.format(summary[k]) for k, _, f in cols) + " |")
+    nets = results.get("networks", {})
+    if nets:
+        lines += [
+            "",
+            "| model | checkpoint | network | latent | parameters | size [MB] | samples | field build [s] "
+            "| training [s] |",
+            "|---|---|---|---|---|---|---|---|---|",
+        ]
+        for name, n in nets.items():
+            lines.append(
+                f"| {name} | `{n['checkpoint']}` | {n['layers']} × {n['width']} | {n['latent']} | "
+                f"{n['parameters']:,} | {n['checkpoint_mb']:.1f} | {n['samples']} | {n['build_s']} | "
+                f"{n['train_s']} |"
+            )
     for name, rows in results.get("rows", {}).items():
         stages = _stage_medians(rows)
         if stages:
@@ -162,6 +199,10 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--checkpoint", type=Path, default=REPO / "models" / "planner.pt")
     parser.add_argument("--ablation", type=Path, default=REPO / "models" / "planner_2ch.pt")
+    parser.add_argument("--paper", type=Path, default=REPO / "models" / "planner_paper.pt")
+    parser.add_argument(
+        "--threads", type=int, default=1, help="torch threads while planning (ImplicitPlannerConfig.threads)"
+    )
     parser.add_argument("--layouts", type=int, default=60, help="number of layouts (≥ 50 for acceptance)")
     parser.add_argument("--seed", type=int, default=TEST_SEED_START, help="layout seed (≥ 100000: unseen)")
     parser.add_argument("--hand-radius", type=float, default=0.04, help="[m] hand sphere radius")
@@ -176,13 +217,18 @@ def main(argv: list[str] | None = None) -> int:
     models = {"implicit (t, o, toa)": args.checkpoint}
     if args.ablation.is_file():
         models["implicit (t, toa)"] = args.ablation
+    if args.paper.is_file():
+        models["implicit (t, o, toa), paper size"] = args.paper
     results: dict[str, Any] = {"seed": args.seed, "cases": len(cases), "hand_radius": args.hand_radius}
     results["command"] = "python benchmarks/planner.py " + " ".join(
         argv if argv is not None else sys.argv[1:]
     )
     results["models"], results["rows"] = {}, {}
+    results["networks"] = {name: network(path) for name, path in models.items()}
     for name, path in models.items():
-        planner = ImplicitPlanner(path, ImplicitPlannerConfig(hand_radius=args.hand_radius))
+        planner = ImplicitPlanner(
+            path, ImplicitPlannerConfig(hand_radius=args.hand_radius, threads=args.threads)
+        )
         rows = []
         for case in cases:
             row = evaluate(planner, case, args.hand_radius)

@@ -18,11 +18,14 @@ from hsi_planning.fields import (
     compute_many,
     demo_path,
     descend,
+    descend_field,
     fields_cache_key,
     load_fields,
+    prepare_descent,
     save_fields,
     voxelize,
 )
+from hsi_planning.fields.descent import descent_potential
 from hsi_planning.trajectory import WristTrajectory
 
 CENTRE = np.array([0.5, 0.2, 0.9])
@@ -299,6 +302,21 @@ def test_descent_reaches_the_goal_with_consistent_timing(sphere_cloud) -> None:
     rel = result.positions - start
     off = np.linalg.norm(rel - (rel @ u)[:, None] * u, axis=1)
     assert off[len(off) // 2] < 0.03
+
+
+def test_a_prepared_descent_field_gives_the_same_descent(sphere_cloud) -> None:
+    points, labels = sphere_cloud
+    demo, start, _goal = oblique_demo(speed=0.8)
+    fs = compute_fields(points, labels, [TARGET], [], demo)
+    phi, far = np.asarray(fs.phi, dtype=np.float64), fs.config.unreachable_time
+    prepared = prepare_descent(fs.grid, phi, far)
+    assert prepared.phi is phi  # not copied: the cache key of its user
+    np.testing.assert_array_equal(prepared.potential, descent_potential(phi, far))
+    x0 = start + np.array([0.04, 0.0, -0.04])
+    plain = descend_field(fs.grid, phi, x0, fs.goal, blocked_value=far)
+    fast = descend_field(fs.grid, phi, x0, fs.goal, blocked_value=far, prepared=prepared)
+    np.testing.assert_array_equal(plain.positions, fast.positions)
+    np.testing.assert_array_equal(plain.times, fast.times)
 
 
 def test_descent_follows_a_demo_around_a_wall() -> None:

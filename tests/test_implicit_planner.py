@@ -379,6 +379,8 @@ def test_benchmark_quick_with_the_committed_checkpoint(tmp_path: Path, repo_root
             str(ckpt),
             "--ablation",
             str(tmp_path / "none.pt"),
+            "--paper",
+            str(tmp_path / "none.pt"),
             "--out",
             str(tmp_path),
         ],
@@ -392,6 +394,9 @@ def test_benchmark_quick_with_the_committed_checkpoint(tmp_path: Path, repo_root
     summary = results["models"]["implicit (t, o, toa)"]
     assert summary["cases"] == 6
     assert summary["success_rate"] >= 0.8, proc.stdout
+    assert list(results["networks"]) == ["implicit (t, o, toa)"]  # the absent variants are not run
+    net = results["networks"]["implicit (t, o, toa)"]
+    assert net["parameters"] > 10_000 and 0.0 < net["checkpoint_mb"] <= 10.0
     assert (tmp_path / "planner.md").read_text().startswith("# Implicit planner benchmark")
 
 

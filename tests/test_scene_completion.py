@@ -193,3 +193,18 @@ def test_a_held_object_with_a_hidden_bottom_reaches_down_its_class_height() -> N
     shelf = _plane((0.4, 0.7), (-0.1, 0.2), 0.45, 0.01)  # an obstacle under it: not lower than that
     lo, _ = completed_bounds(top, np.zeros((0, 3)), "bottle", shelf)
     assert lo[2] == pytest.approx(0.45)
+
+
+def test_clipping_the_completion_keeps_exactly_the_points_inside_the_clip_box() -> None:
+    points, labels = _shelf_scene()
+    box = (np.array([0.55, -0.2, 0.5]), np.array([0.9, 0.3, 1.05]))
+    full, full_lab = complete_cloud(points, labels, CLASSES, exclude=[2], label_names=NAMES)
+    clipped, clip_lab = complete_cloud(points, labels, CLASSES, exclude=[2], label_names=NAMES, clip=box)
+    assert np.array_equal(clipped[: len(points)], points)  # observed points are all kept
+    added = clipped[len(points) :]
+    assert len(added) > 0 and ((added >= box[0]) & (added <= box[1])).all()
+    inside = ((full >= box[0]) & (full <= box[1])).all(axis=1)
+    inside_clip = ((clipped >= box[0]) & (clipped <= box[1])).all(axis=1)
+    assert np.array_equal(full[inside], clipped[inside_clip])  # the same points in the same order
+    assert np.array_equal(full_lab[inside], clip_lab[inside_clip])
+    assert len(clipped) < len(full)

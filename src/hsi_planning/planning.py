@@ -123,12 +123,15 @@ class PlanRequest:
             raise PlanningError(f"invalid point cloud: {exc}") from exc
         return cls(cloud=cloud, target=target, **kwargs)
 
-    def target_points(self) -> tuple[NDArray[np.float64], NDArray[np.int64], list[int]]:
+    def target_points(
+        self, clip: tuple[ArrayLike, ArrayLike] | None = None
+    ) -> tuple[NDArray[np.float64], NDArray[np.int64], list[int]]:
         """The cloud as the planners see it: points (N, 3) [m], labels (N,) and the target's label ids.
 
         With ``complete`` the hidden parts of shelf boards and of the other objects are filled in
-        (:func:`~hsi_planning.implicit.scene_completion.complete_cloud`). For ``place`` with a
-        ``place_position``, the held object's points are moved to the placement.
+        (:func:`~hsi_planning.implicit.scene_completion.complete_cloud`); with ``clip`` (lo (3,), hi (3,))
+        [m] only those inside that box (for a planner that crops the cloud to it anyway). For ``place``
+        with a ``place_position``, the held object's points are moved to the placement.
 
         Raises:
             PlanningError: the target (or an ``object_labels`` name) is not a label of the cloud, or it
@@ -158,6 +161,7 @@ class PlanRequest:
                 ids,
                 label_names=self.cloud.label_names,
                 region=(reach.min(axis=0) - COMPLETION_REACH, reach.max(axis=0) + COMPLETION_REACH),
+                clip=clip,
             )
         if self.action == "place" and self.place_position is not None:
             from hsi_planning.implicit.problem import move_label_to

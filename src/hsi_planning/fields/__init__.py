@@ -15,7 +15,14 @@ from hsi_planning.fields.cache import (
     save_fields,
 )
 from hsi_planning.fields.config import FieldConfig
-from hsi_planning.fields.descent import Descent, DescentConfig, descend, descend_field
+from hsi_planning.fields.descent import (
+    Descent,
+    DescentConfig,
+    DescentField,
+    descend,
+    descend_field,
+    prepare_descent,
+)
 from hsi_planning.fields.distance import inverse_field, point_distance, target_distance
 from hsi_planning.fields.field_set import FieldSet, compute_fields
 from hsi_planning.fields.grid import GridSpec
@@ -27,6 +34,7 @@ __all__ = [
     "DemoPath",
     "Descent",
     "DescentConfig",
+    "DescentField",
     "FieldConfig",
     "FieldJob",
     "FieldSet",
@@ -42,6 +50,7 @@ __all__ = [
     "inverse_field",
     "load_fields",
     "point_distance",
+    "prepare_descent",
     "save_fields",
     "speed_field",
     "split_cloud",

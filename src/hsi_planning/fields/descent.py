@@ -69,6 +69,28 @@ def descent_potential(phi: ArrayLike, blocked_value: float) -> FloatArray:
     return np.asarray(arr[tuple(idx)], dtype=np.float64)
 
 
+@dataclass(frozen=True, eq=False)
+class DescentField:
+    """A time field made ready for descent (:func:`prepare_descent`), to reuse for several descents.
+
+    Attributes:
+        phi: (n, n, n) [s] the field itself (not copied: it must not change afterwards).
+        potential: (n, n, n) [s] :func:`descent_potential` of ``phi``.
+        gradient: (n, n, n, 3) [s/m] the potential's gradient.
+    """
+
+    phi: FloatArray
+    potential: FloatArray
+    gradient: FloatArray
+
+
+def prepare_descent(grid: GridSpec, phi: ArrayLike, blocked_value: float) -> DescentField:
+    """The :class:`DescentField` of ``phi`` (n, n, n) [s]: potential and gradient, computed once."""
+    arr = np.asarray(phi, dtype=np.float64)
+    potential = descent_potential(arr, blocked_value)
+    return DescentField(phi=arr, potential=potential, gradient=grid.gradient(potential))
+
+
 def descend_field(
     grid: GridSpec,
     phi: ArrayLike,
@@ -77,10 +99,12 @@ def descend_field(
     *,
     blocked_value: float,
     config: DescentConfig | None = None,
+    prepared: DescentField | None = None,
 ) -> Descent:
     """Descend the time-of-arrival field ``phi`` (n, n, n) [s] from ``start`` (3,) [m] towards ``goal`` (3,).
 
     Nodes with φ ≥ ``blocked_value`` (obstacles, unreachable) are treated as described in the module doc.
+    ``prepared``: ``phi``'s :class:`DescentField` when already computed (the same answer, faster).
 
     Raises:
         PlanningError: start outside the grid, or a field without reachable nodes.
@@ -92,8 +116,9 @@ def descend_field(
         raise PlanningError("start and goal must be finite 3-vectors [m]")
     if not grid.contains(x)[0]:
         raise PlanningError(f"start {x.round(3).tolist()} [m] lies outside the grid around {grid.centre}")
-    potential = descent_potential(phi, blocked_value)
-    gradient = grid.gradient(potential)
+    if prepared is None:
+        prepared = prepare_descent(grid, phi, blocked_value)
+    potential, gradient = prepared.potential, prepared.gradient
     positions = [x.copy()]
     values = [float(grid.interpolate(potential, x)[0])]
     best, since_best = values[0], 0

@@ -191,16 +191,32 @@ class ImplicitPlanner:
 
     def _prepare(self, request: PlanRequest) -> tuple[F64, NDArray[np.int64], list[int], F64]:
         """(points, labels, target ids, retreat) with the cloud cropped to the planning region."""
-        points, labels, ids = request.target_points()
-        is_target = np.isin(labels, ids)
         w = np.asarray(request.start_position, dtype=np.float64)
         retreat = w if request.retreat_position is None else np.asarray(request.retreat_position)
-        tp = points[is_target]
-        centre = 0.5 * (tp.min(axis=0) + tp.max(axis=0))
-        lo = np.minimum.reduce([centre - _GRID_REACH, w, retreat]) - self.config.crop_margin
-        hi = np.maximum.reduce([centre + _GRID_REACH, w, retreat]) + self.config.crop_margin
+        clip = None  # the completion adds no point outside the crop (unless the target moves first)
+        if request.action == "grasp" or request.place_position is None:
+            cloud = request.cloud
+            try:
+                own = np.isin(
+                    cloud.labels, [cloud.label_id(n) for n in (request.target, *request.object_labels)]
+                )
+            except CloudError:  # target_points raises it with the planner's message
+                own = np.zeros(0, dtype=bool)
+            if own.any():
+                clip = self._crop_box(np.asarray(cloud.points)[own], w, retreat)
+        points, labels, ids = request.target_points(clip=clip)
+        is_target = np.isin(labels, ids)
+        lo, hi = self._crop_box(points[is_target], w, retreat)
         keep = is_target | ((points >= lo) & (points <= hi)).all(axis=1)
         return points[keep], labels[keep], ids, np.array(retreat, dtype=np.float64)
+
+    def _crop_box(self, target_pts: F64, w: F64, retreat: F64) -> tuple[F64, F64]:
+        """(lo (3,), hi (3,)) [m] the planning region: the grid around the target, the wrist and the
+        retreat point, grown by ``crop_margin``."""
+        centre = 0.5 * (target_pts.min(axis=0) + target_pts.max(axis=0))
+        lo = np.minimum.reduce([centre - _GRID_REACH, w, retreat]) - self.config.crop_margin
+        hi = np.maximum.reduce([centre + _GRID_REACH, w, retreat]) + self.config.crop_margin
+        return lo, hi
 
     def _plan(self, request: PlanRequest) -> PlanResult:
         cfg = self.config

@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 from scipy import ndimage
 
 from hsi_planning.errors import PlanningError
-from hsi_planning.fields.descent import descent_potential
+from hsi_planning.fields.descent import DescentField, prepare_descent
 from hsi_planning.fields.field_set import FieldSet
 from hsi_planning.implicit.latent import LatentFitConfig, fit_latent, predict_fields, prior_toa_anchors
 from hsi_planning.implicit.model import AutoDecoder, to_unit_cube
@@ -210,13 +210,17 @@ def wrist_free(ctx: SegmentContext, *, carrying: bool) -> Callable[[float], NDAr
     return free
 
 
-def repair_field(phi: F64, ctx: SegmentContext, free: NDArray[np.bool_]) -> F64:
+def repair_field(
+    phi: F64, ctx: SegmentContext, free: NDArray[np.bool_], prepared: DescentField | None = None
+) -> F64:
     """φ re-solved by fast marching from the contact with the learned speed 1/|∇φ̂| through the ``free``
-    nodes (n, n, n) (see :func:`wrist_free`); other nodes hold ``unreachable_time``."""
+    nodes (n, n, n) (see :func:`wrist_free`); other nodes hold ``unreachable_time``. ``prepared``:
+    ``phi``'s :class:`~hsi_planning.fields.descent.DescentField` when already computed."""
     cfg, fs = ctx.config, ctx.fields
     grid, far = fs.grid, fs.config.unreachable_time
-    pot = descent_potential(phi, far)
-    grad = np.linalg.norm(grid.gradient(pot), axis=-1)
+    if prepared is None:
+        prepared = prepare_descent(grid, phi, far)
+    grad = np.linalg.norm(prepared.gradient, axis=-1)
     speed = np.clip(1.0 / np.maximum(grad, 1e-6), cfg.min_speed, cfg.max_speed)
     r = np.linalg.norm(grid.points() - ctx.contact, axis=1).reshape(grid.shape)
     r0 = 1.5 * grid.resolution

@@ -135,9 +135,10 @@ def _disk(centre: F64, radius: float, spacing: float) -> F64:
     return np.column_stack([centre[0] + radius * np.cos(a), centre[1] + radius * np.sin(a)])
 
 
-def _hull_fill(xy: F64, spacing: float) -> F64:
+def _hull_fill(xy: F64, spacing: float, box: tuple[F64, F64] | None = None) -> F64:
     """(K, 2) [m] grid points every ``spacing`` inside the convex hull of ``xy`` (N, 2); empty when the
-    points are degenerate (collinear or too few)."""
+    points are degenerate (collinear or too few). ``box``: (lo (≥2,), hi (≥2,)) [m]; only the grid
+    points inside it (the same ones, found faster)."""
     if xy.shape[0] < 3:
         return np.zeros((0, 2))
     try:
@@ -146,15 +147,19 @@ def _hull_fill(xy: F64, spacing: float) -> F64:
         return np.zeros((0, 2))
     lo, hi = xy.min(axis=0), xy.max(axis=0)
     axes = [np.arange(lo[i], hi[i] + 0.5 * spacing, spacing) for i in range(2)]
+    if box is not None:
+        axes = [a[(a >= box[0][i]) & (a <= box[1][i])] for i, a in enumerate(axes)]
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 2)
     inside = (grid @ hull.equations[:, :2].T + hull.equations[:, 2] <= 1e-9).all(axis=1)
     return np.asarray(grid[inside], dtype=np.float64)
 
 
-def _levels(z_lo: float, z_hi: float, spacing: float) -> F64:
-    """(L,) [m] heights from ``z_lo`` to ``z_hi`` every ≤ ``spacing`` (both ends included)."""
+def _levels(z_lo: float, z_hi: float, spacing: float, box: tuple[F64, F64] | None = None) -> F64:
+    """(L,) [m] heights from ``z_lo`` to ``z_hi`` every ≤ ``spacing`` (both ends included); with ``box``
+    (lo (3,), hi (3,)) [m] only those within its height range."""
     n = max(1, int(np.ceil((z_hi - z_lo) / spacing)))
-    return np.linspace(z_lo, z_hi, n + 1)
+    z = np.linspace(z_lo, z_hi, n + 1)
+    return z if box is None else z[(z >= box[0][2]) & (z <= box[1][2])]
 
 
 def _slab(xy: F64, levels: F64) -> F64:
@@ -175,6 +180,21 @@ def _parent_points(pts: F64, lab: NDArray[np.int64], names: dict[int, str] | Non
     return pts[np.isin(lab, ids)]
 
 
+def _furniture_near(furniture: F64, by_x: NDArray[np.intp], xs: F64, lo: F64, hi: F64) -> F64:
+    """(M, 3) [m] the ``furniture`` points (in their order) within ``_SEARCH`` of the box ``lo``..``hi``
+    (down to ``SUPPORT_DROP`` further below it); ``by_x`` sorts ``furniture`` by x, ``xs`` = the sorted x."""
+    a = int(np.searchsorted(xs, lo[0] - _SEARCH, side="left"))
+    b = int(np.searchsorted(xs, hi[0] + _SEARCH, side="right"))
+    f = furniture[np.sort(by_x[a:b])]
+    near = (
+        (f[:, 1] >= lo[1] - _SEARCH)
+        & (f[:, 1] <= hi[1] + _SEARCH)
+        & (f[:, 2] >= lo[2] - _SEARCH - SUPPORT_DROP)
+        & (f[:, 2] <= hi[2] + _SEARCH)
+    )
+    return np.asarray(f[near], dtype=np.float64)
+
+
 def complete_cloud(
     points: ArrayLike,
     labels: ArrayLike,
@@ -185,6 +205,7 @@ def complete_cloud(
     label_names: dict[int, str] | None = None,
     keep_clear: float = 0.02,
     region: tuple[ArrayLike, ArrayLike] | None = None,
+    clip: tuple[ArrayLike, ArrayLike] | None = None,
 ) -> tuple[F64, NDArray[np.int64]]:
     """The cloud with the hidden parts of boards and objects filled in (see the module doc).
 
@@ -197,6 +218,8 @@ def complete_cloud(
         keep_clear: [m] added points this close to an ``exclude`` point are dropped (a neighbour's guessed
             width does not reach into the target the cameras see).
         region: (lo (3,), hi (3,)) [m] box; labels with no point in it are not completed (speed).
+        clip: (lo (3,), hi (3,)) [m] box; no point outside it is added (speed, for a caller that crops
+            the cloud to that box: the points it keeps are the same).
 
     Returns:
         (points (N + K, 3) [m], labels (N + K,)): the input followed by the added points.
@@ -210,6 +233,9 @@ def complete_cloud(
     r_lo, r_hi = (
         np.asarray(v, dtype=np.float64) for v in (region or (-np.inf * np.ones(3), np.inf * np.ones(3)))
     )
+    box = None if clip is None else (np.asarray(clip[0], np.float64), np.asarray(clip[1], np.float64))
+    by_x = np.argsort(furniture[:, 0], kind="stable")  # furniture near an object, found by bisection
+    xs = furniture[by_x, 0]
     added: list[F64] = []
     added_labels: list[NDArray[np.int64]] = []
     order = np.argsort(lab, kind="stable")  # each label's points in cloud order, found by bisection
@@ -226,27 +252,26 @@ def complete_cloud(
         lo, hi = own.min(axis=0), own.max(axis=0)
         if cls in BOARD_CLASSES and hi[2] - lo[2] <= _MAX_BOARD_THICKNESS:
             xy = np.vstack([own[:, :2], _parent_points(pts, lab, label_names, label_id)[:, :2]])
-            fill = _slab(_hull_fill(xy, spacing), _levels(min(lo[2], hi[2] - PANEL), hi[2], spacing))
-        elif cls in OBJECT_KINDS:
-            near = (
-                (furniture[:, :2] >= lo[:2] - _SEARCH).all(axis=1)
-                & (furniture[:, :2] <= hi[:2] + _SEARCH).all(axis=1)
-                & (furniture[:, 2] >= lo[2] - _SEARCH - SUPPORT_DROP)
-                & (furniture[:, 2] <= hi[2] + _SEARCH)
+            fill = _slab(
+                _hull_fill(xy, spacing, box), _levels(min(lo[2], hi[2] - PANEL), hi[2], spacing, box)
             )
-            z = support_height(own, furniture[near])
+        elif cls in OBJECT_KINDS:
+            z = support_height(own, _furniture_near(furniture, by_x, xs, lo, hi))
             parts = []
             if cls in ROUND_KINDS:  # the far side the cameras miss: a fitted upright cylinder
                 centre, radius = fit_round(own, DEFAULTS[cls].size[0])
                 parts.append(
-                    _slab(_hull_fill(_disk(centre, radius, spacing), spacing), _levels(lo[2], hi[2], spacing))
+                    _slab(
+                        _hull_fill(_disk(centre, radius, spacing), spacing, box),
+                        _levels(lo[2], hi[2], spacing, box),
+                    )
                 )
             if z is not None and lo[2] - z >= 0.5 * spacing:
                 centre = 0.5 * (lo[:2] + hi[:2])
                 xy = np.vstack(
                     [own[:, :2], _disk(centre, 0.5 * CLASS_SCALE[1] * DEFAULTS[cls].size[0], spacing)]
                 )
-                parts.append(_slab(_hull_fill(xy, spacing), _levels(z, lo[2], spacing)))
+                parts.append(_slab(_hull_fill(xy, spacing, box), _levels(z, lo[2], spacing, box)))
             if not parts:
                 continue
             fill = np.vstack(parts)
@@ -255,6 +280,8 @@ def complete_cloud(
             fill = own[inside] - np.array([0.0, 0.0, PANEL])
         else:
             continue
+        if box is not None:
+            fill = fill[((fill >= box[0]) & (fill <= box[1])).all(axis=1)]
         if fill.shape[0]:
             added.append(fill)
             added_labels.append(np.full(fill.shape[0], label_id, dtype=np.int64))

@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hsi_planning.errors import PlanningError
-from hsi_planning.fields.descent import DescentConfig, descend_field, descent_potential
+from hsi_planning.fields.descent import DescentConfig, DescentField, descend_field, prepare_descent
 from hsi_planning.implicit.path import (
     arc_length,
     required_clearance,
@@ -175,10 +175,25 @@ def _descends_from(grid: Any, phi: F64, x: F64, far: float) -> bool:
     return bool(phi[tuple(grid.index(x[None])[0])] < far)
 
 
-def _field_speed(grid: Any, phi: F64, far: float, points: F64) -> F64:
-    """(N,) [m/s] speed 1/|∇φ| of a time field at ``points`` (N, 3) inside the grid."""
-    grad = grid.gradient(descent_potential(phi, far))
-    g = np.linalg.norm(grid.interpolate_gradient(grad, points), axis=1)
+class _Prepared:
+    """φ → its :class:`DescentField`, computed once per field array (the fields of one segment are
+    descended, timed and repaired several times; none of them changes after it is made)."""
+
+    def __init__(self, grid: Any, far: float) -> None:
+        self._grid, self._far = grid, far
+        self._done: dict[int, DescentField] = {}
+
+    def __call__(self, phi: F64) -> DescentField:
+        hit = self._done.get(id(phi))
+        if hit is None or hit.phi is not phi:  # (an entry keeps its float64 phi alive: ids stay unique)
+            hit = prepare_descent(self._grid, phi, self._far)
+            self._done[id(phi)] = hit
+        return hit
+
+
+def _field_speed(grid: Any, field: DescentField, points: F64) -> F64:
+    """(N,) [m/s] speed 1/|∇φ| of a prepared time field at ``points`` (N, 3) inside the grid."""
+    g = np.linalg.norm(grid.interpolate_gradient(field.gradient, points), axis=1)
     return np.asarray(1.0 / np.maximum(g, 1e-6), dtype=np.float64)
 
 
@@ -191,6 +206,7 @@ def _descend(
     free: NDArray[np.bool_],
     margin: float,
     connect: bool,
+    prepared: _Prepared,
     finish: Callable[[], F64] | None = None,
     capped: bool = True,
 ) -> tuple[F64, F64, float]:
@@ -228,11 +244,20 @@ def _descend(
     descent = DescentConfig(
         step=cfg.descent_step, stop_radius=max(lift, cfg.descent_step), max_steps=cfg.max_descent_steps
     )
-    desc = descend_field(grid, phi, start, ctx.contact, blocked_value=far, config=descent)
+    desc = descend_field(
+        grid, phi, start, ctx.contact, blocked_value=far, config=descent, prepared=prepared(phi)
+    )
     parts = [(phi, desc.positions)]
     if not desc.reached and finish is not None:
+        fixed = finish()
         rest = descend_field(
-            grid, finish(), desc.positions[-1], ctx.contact, blocked_value=far, config=descent
+            grid,
+            fixed,
+            desc.positions[-1],
+            ctx.contact,
+            blocked_value=far,
+            config=descent,
+            prepared=prepared(fixed),
         )
         parts.append((finish(), rest.positions[1:]))
         desc = rest
@@ -248,7 +273,7 @@ def _descend(
         head.append(_waypoint(anchor, start[None]))
     path = np.vstack([*head, *(p for _, p in parts), *tail, ctx.contact[None]])
     speeds = [np.full(len(head), mean_speed)]
-    speeds += [_field_speed(grid, f, far, p) for f, p in parts]
+    speeds += [_field_speed(grid, prepared(f), p) for f, p in parts]
     speeds.append(np.full(len(tail) + 1, cfg.min_speed))
     learned_length = float(arc_length(parts[0][1])[-1]) if len(parts[0][1]) > 1 else 0.0
     return path, np.concatenate(speeds), learned_length
@@ -286,9 +311,10 @@ def plan_segment(
     failures: list[str] = []
     lifted = dataclasses.replace(ctx, lift=ctx.lift if carrying else 0.0)
     free_at = wrist_free(lifted, carrying=carrying)
+    prepared = _Prepared(ctx.fields.grid, ctx.fields.config.unreachable_time)
     for kind, margin in attempts:
         free = free_at(margin)
-        repaired = functools.cache(lambda free=free: repair_field(phi, lifted, free))
+        repaired = functools.cache(lambda free=free: repair_field(phi, lifted, free, prepared=prepared(phi)))
         try:
             field_used = phi if kind == "learned" else repaired()
             finish = repaired if kind == "learned" and cfg.repair != "never" else None
@@ -300,6 +326,7 @@ def plan_segment(
                 free=free,
                 margin=margin,
                 connect=connect,
+                prepared=prepared,
                 finish=finish,
                 capped=kind == "learned",
             )
