@@ -236,6 +236,25 @@ def test_plan_reaches_the_contact_collision_free(planner: ImplicitPlanner, hand:
     json.dumps(result.to_dict())
 
 
+@pytest.mark.parametrize("refit_leave", [False, True])
+def test_planning_the_leave_in_a_second_thread_gives_the_same_plan(
+    checkpoint: Path, refit_leave: bool
+) -> None:
+    cloud = scene_cloud()
+    results = []
+    for parallel in (False, True):
+        cfg = ImplicitPlannerConfig(fit_steps=4, refit_leave=refit_leave, parallel_segments=parallel)
+        results.append(ImplicitPlanner(checkpoint, cfg).plan(cloud, "can", "left", "grasp", START["left"]))
+    for seg in ("approach", "leave"):
+        a, b = (getattr(r, seg) for r in results)
+        np.testing.assert_array_equal(a.position, b.position)
+        np.testing.assert_array_equal(a.quaternion, b.quaternion)
+        np.testing.assert_array_equal(a.t, b.t)
+    keys = list(results[1].timings)
+    assert keys[:3] == ["prepare", "fields", "match_approach"] and keys[-2:] == ["path_leave", "total"]
+    assert set(keys) == set(results[0].timings)
+
+
 def test_a_path_short_of_the_clearance_is_returned_only_within_relaxed_margin(checkpoint: Path) -> None:
     cloud = scene_cloud()
     strict = ImplicitPlannerConfig(fit_steps=5, check_margin=0.4, relaxed_margin=0.0)  # no path keeps it

@@ -28,6 +28,7 @@ import dataclasses
 import logging
 import time
 from collections.abc import Iterator, Mapping
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -64,15 +65,24 @@ from hsi_planning.implicit.segment import SegmentPlan, plan_segment
 from hsi_planning.implicit.train import Checkpoint, load_checkpoint
 from hsi_planning.perception.cloud import LabelledCloud
 from hsi_planning.planning import PlanRequest, PlanResult
-from hsi_planning.trajectory import SEGMENTS, Action, Hand, WristTrajectory
+from hsi_planning.trajectory import SEGMENTS, Action, Hand, Segment, WristTrajectory
 
 __all__ = ["ImplicitPlanner", "ImplicitPlannerConfig"]
 
 _LOG = logging.getLogger(__name__)
 F64 = NDArray[np.float64]
+#: Order of the stage timings in :attr:`PlanResult.timings`.
+_STAGES = ("prepare", "fields", "match", "fit", "predict", "path")
 _GRID_REACH = (
     0.5 * PLANNER_FIELD_CONFIG.size + PLANNER_FIELD_CONFIG.approach_shift + PLANNER_FIELD_CONFIG.resolution
 )
+
+
+def _stage_rank(key: str) -> tuple[int, int]:
+    """Sort key of a timing name: shared stages, then the approach's, then the leave's, in pipeline order."""
+    stage, _, seg = key.partition("_")
+    group = 1 + SEGMENTS.index(seg) if seg in SEGMENTS else 0
+    return group, _STAGES.index(stage) if stage in _STAGES else len(_STAGES)
 
 
 @contextlib.contextmanager
@@ -281,44 +291,35 @@ class ImplicitPlanner:
         rise = clear_lift(obstacles, contact, ctx.carried, cfg.lift_pad, cfg.check_margin)
         lift = min(max(cfg.lift_height, rise), cfg.max_lift)
         ctx = dataclasses.replace(ctx, lift=free_lift(ctx, obstacles, lift, cfg.check_margin))
-        plans: dict[str, SegmentPlan] = {}
         info: dict[str, Any] = {
             "approach_axis": np.asarray(axis).tolist(),
             "contact": contact.tolist(),
             "lift": ctx.lift,
             "held_bounds": [np.asarray(b).tolist() for b in held],
         }
+        anchors = {"approach": w, "leave": retreat}
+        matched = {seg: self._match(problem, request, ctx, seg, timings) for seg in SEGMENTS}
         z: NDArray[np.float32] | None = None
-        for seg in SEGMENTS:
-            t0 = time.perf_counter()
-            cond = condition_vector(problem.goal_height, request.hand, request.action, seg)
-            match = self.matcher.match(local_feature(fields, cond), grid.centre)
-            timings[f"match_{seg}"] = time.perf_counter() - t0
-            t0 = time.perf_counter()
-            if z is None or cfg.refit_leave:
-                z, loss = fit_segment_latent(self.model, ctx, cond, match.demo, match.z_init)
-                info[f"fit_loss_{seg}"] = loss
-            timings[f"fit_{seg}"] = time.perf_counter() - t0
-            t0 = time.perf_counter()
-            phi = remaining_time(self.model, z, cond, ctx)
-            timings[f"predict_{seg}"] = time.perf_counter() - t0
-            t0 = time.perf_counter()
-            carrying = (request.action, seg) in (("grasp", "leave"), ("place", "approach"))
-            plans[seg] = plan_segment(
-                phi,
-                ctx,
-                w if seg == "approach" else retreat,
-                match.demo,
-                carrying=carrying,
-                connect=seg == "approach" or request.retreat_position is not None,
-            )
-            timings[f"path_{seg}"] = time.perf_counter() - t0
-            info[f"prior_{seg}"] = {
-                "index": match.index,
-                "distance": match.distance,
-                "layout": self.bank.layout[match.index],
-            }
-            info[f"path_{seg}"] = plans[seg].info
+        if not cfg.refit_leave:  # the leave reuses the approach's scene code: fit it first
+            cond, match = matched["approach"]
+            z = self._fit(ctx, "approach", cond=cond, match=match, timings=timings, info=info)
+            timings["fit_leave"] = 0.0
+
+        def run(seg: Segment) -> SegmentPlan:
+            cond, match = matched[seg]
+            fit = {"cond": cond, "match": match, "timings": timings, "info": info}
+            code = z if z is not None else self._fit(ctx, seg, **fit)  # refit_leave: a code per segment
+            return self._segment(request, ctx, seg, anchor=anchors[seg], z=code, **fit)
+
+        plans: dict[str, SegmentPlan] = {}
+        if cfg.parallel_segments:  # the leave in a second thread (torch, KD-tree and numpy free the GIL)
+            with ThreadPoolExecutor(max_workers=1, thread_name_prefix="hsi-leave") as pool:
+                pending = pool.submit(run, "leave")
+                plans["approach"] = run("approach")
+                plans["leave"] = pending.result()
+        else:
+            plans = {seg: run(seg) for seg in SEGMENTS}
+        timings = {k: timings[k] for k in sorted(timings, key=_stage_rank)}
         approach, leave = self._trajectories(request, plans)
         timings["total"] = time.perf_counter() - t_start
         _LOG.info(
@@ -330,6 +331,69 @@ class ImplicitPlanner:
             ", ".join(f"{k} {1e3 * v:.0f}" for k, v in timings.items() if k != "total"),
         )
         return PlanResult(approach=approach, leave=leave, timings=timings, info=info)
+
+    def _match(
+        self, problem: Any, request: PlanRequest, ctx: SegmentContext, seg: Segment, timings: dict[str, float]
+    ) -> tuple[NDArray[np.float32], Any]:
+        """(condition vector, nearest training sample) of one segment."""
+        t0 = time.perf_counter()
+        cond = condition_vector(problem.goal_height, request.hand, request.action, seg)
+        match = self.matcher.match(local_feature(ctx.fields, cond), ctx.fields.grid.centre)
+        timings[f"match_{seg}"] = time.perf_counter() - t0
+        return cond, match
+
+    def _fit(
+        self,
+        ctx: SegmentContext,
+        seg: Segment,
+        *,
+        cond: NDArray[np.float32],
+        match: Any,
+        timings: dict[str, float],
+        info: dict[str, Any],
+    ) -> NDArray[np.float32]:
+        """The scene code z fitted for one segment (Eq. 9), warm-started from the match."""
+        t0 = time.perf_counter()
+        z, loss = fit_segment_latent(self.model, ctx, cond, match.demo, match.z_init)
+        info[f"fit_loss_{seg}"] = loss
+        timings[f"fit_{seg}"] = time.perf_counter() - t0
+        return z
+
+    def _segment(
+        self,
+        request: PlanRequest,
+        ctx: SegmentContext,
+        seg: Segment,
+        *,
+        anchor: F64,
+        z: NDArray[np.float32],
+        cond: NDArray[np.float32],
+        match: Any,
+        timings: dict[str, float],
+        info: dict[str, Any],
+    ) -> SegmentPlan:
+        """φ̂ of one segment and its path (the dictionaries get this segment's own keys only)."""
+        t0 = time.perf_counter()
+        phi = remaining_time(self.model, z, cond, ctx)
+        timings[f"predict_{seg}"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        carrying = (request.action, seg) in (("grasp", "leave"), ("place", "approach"))
+        plan = plan_segment(
+            phi,
+            ctx,
+            anchor,
+            match.demo,
+            carrying=carrying,
+            connect=seg == "approach" or request.retreat_position is not None,
+        )
+        timings[f"path_{seg}"] = time.perf_counter() - t0
+        info[f"prior_{seg}"] = {
+            "index": match.index,
+            "distance": match.distance,
+            "layout": self.bank.layout[match.index],
+        }
+        info[f"path_{seg}"] = plan.info
+        return plan
 
     def _trajectories(
         self, request: PlanRequest, plans: dict[str, SegmentPlan]

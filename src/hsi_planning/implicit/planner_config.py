@@ -61,6 +61,8 @@ class ImplicitPlannerConfig:
     #: or "field" (1/|∇φ̂| of the descended field)
     timing: str = "prior"
     crop_margin: float = 0.3  #: [m] obstacle points farther than this outside the planning region are ignored
+    #: [-] plan the leave in a second thread while the approach is planned (same result; both cores)
+    parallel_segments: bool = True
     threads: int = 1  #: [-] torch threads while planning (1: fastest on busy shared cores); 0 = leave as is
     seed: int = 0  #: [-] seed of the fit's point subsampling and the obstacle anchors
 
