@@ -56,8 +56,9 @@ class PlannerNodeConfig:
     start_left: tuple[float, float, float] = (0.2, 0.25, 1.0)
     #: Wrist position of the right hand before the reach (world frame) [m].
     start_right: tuple[float, float, float] = (0.2, -0.25, 1.0)
-    #: Latent-fit steps of the implicit planner [steps].
-    fit_steps: int = 20
+    #: Latent-fit steps of the implicit planner [steps]; 0 = its benchmarked default
+    #: (``ImplicitPlannerConfig.fit_steps``).
+    fit_steps: int = 0
     #: Frame of the published trajectories (the cloud's frame) [-].
     frame_id: str = "world"
     #: Labelled cloud topic [-].
@@ -82,8 +83,8 @@ class PlannerNodeConfig:
             value = np.asarray(getattr(self, name), dtype=np.float64)
             if value.shape != (3,) or not np.isfinite(value).all():
                 raise ConfigError(f"PlannerNodeConfig.{name} must be 3 finite numbers [m], got {value}")
-        if self.fit_steps < 1:
-            raise ConfigError(f"PlannerNodeConfig.fit_steps={self.fit_steps} must be ≥ 1")
+        if self.fit_steps < 0:
+            raise ConfigError(f"PlannerNodeConfig.fit_steps={self.fit_steps} must be ≥ 0 (0 = default)")
 
 
 def trajectory_msg(traj: WristTrajectory, task_id: str, stamp_s: float, frame_id: str) -> Any:
@@ -115,7 +116,8 @@ class PlannerNode(Node[PlannerNodeConfig]):
         path = Path(cfg.checkpoint)
         if not path.is_file():
             raise ConfigError(f"planner_node: checkpoint {path} not found (parameter 'checkpoint')")
-        self.planners = {cfg.planner: make_planner(cfg.planner, path, fit_steps=cfg.fit_steps)}
+        options = {"fit_steps": cfg.fit_steps} if cfg.fit_steps and cfg.planner == "implicit" else {}
+        self.planners = {cfg.planner: make_planner(cfg.planner, path, **options)}
         self.spec: Any = None
         if cfg.scene:
             from hsi_planning.scene_paths import load_scene

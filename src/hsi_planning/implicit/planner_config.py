@@ -15,14 +15,14 @@ TIMING_MODES: tuple[str, ...] = ("prior", "field")
 class ImplicitPlannerConfig:
     """Run-time settings of the implicit planner (defaults: ≤ 300 ms per plan on 2 cores)."""
 
-    fit_steps: int = 8  #: [steps] Adam steps of the latent fit (Eq. 9) per fitted segment
+    fit_steps: int = 4  #: [steps] Adam steps of the latent fit (Eq. 9) per fitted segment
     fit_lr: float = 2e-2  #: [1/step] learning rate of the latent fit
     fit_points: int = 512  #: [points] random grid points per fit step
     latent_reg: float = 1e-4  #: [-] λ of λ·||z||² in the fit
     obstacle_anchors: int = 128  #: [points] obstacle nodes used as known D_toa = 0 points (subsampled)
     prior_tail: float = 0.05  #: [m] arc length of τ_prior before the contact used as known D_toa
     refit_leave: bool = False  #: [-] fit z again for the leave (else the approach's scene code is reused)
-    field_stride: int = 2  #: [nodes] D_toa is predicted on every stride-th node and refined trilinearly
+    field_stride: int = 3  #: [nodes] D_toa is predicted on every stride-th node and refined trilinearly
     palm_offset: float = 0.06  #: [m] wrist distance beyond the target along the approach axis (training's)
     hand_radius: float = 0.04  #: [m] radius of the hand sphere kept clear of the observed obstacles
     clearance_margin: float = 0.01  #: [m] extra clearance planned for (cloud noise, smoothing, interpolation)
