@@ -456,3 +456,38 @@ def test_completion_extends_a_hidden_bottom_down_to_the_support_only() -> None:
     mask = furniture_mask(labels, {0: "drawer", 1: "can", 2: "bottle"}, [2])
     assert mask.tolist() == [True, False, False, False]
     assert furniture_mask(labels, None, [2]).tolist() == [True, True, False, False]
+
+
+def test_the_point_checked_free_mask_changes_only_nodes_near_the_contact_and_keeps_the_box_clear() -> None:
+    from hsi_planning.fields import compute_fields
+    from hsi_planning.implicit.runtime_field import box_samples, point_checked_free, wrist_free
+
+    rng = np.random.default_rng(3)
+    contact = np.array([0.44, 0.0, 0.6])  # wrist in front of a 20 cm bottle on a floor, a board 4 cm above
+    bottle = np.column_stack([rng.uniform(0.47, 0.53, (300, 2)) - [0.0, 0.5], rng.uniform(0.5, 0.7, 300)])
+    xs, ys = np.meshgrid(np.arange(0.2, 0.8, 0.01), np.arange(-0.3, 0.3, 0.01))
+    floor = np.column_stack([xs.ravel(), ys.ravel(), np.full(xs.size, 0.5)])
+    board = np.column_stack([xs.ravel(), ys.ravel(), np.full(xs.size, 0.74)])
+    points = np.vstack([bottle, floor, board])
+    labels = np.repeat([1, 2, 3], [len(bottle), len(floor), len(board)])
+    fields = compute_fields(points, labels, [1], [2, 3], approach_direction=[-1.0, 0.0, 0.0])
+    obstacles = Clearance(np.vstack([floor, board]))
+    cfg = ImplicitPlannerConfig()
+    ctx = SegmentContext(
+        fields=fields,
+        clearance=obstacles,
+        contact=contact,
+        contact_clear=float(obstacles(contact)[0]),
+        carried=box_samples(bottle, cfg.carried_padding) - contact,
+        lift=0.02,
+        config=cfg,
+    )
+    free = wrist_free(ctx, carrying=True)(0.01)
+    checked = point_checked_free(ctx, free, 0.01)
+    nodes = fields.grid.points()
+    far = np.linalg.norm(nodes - contact, axis=1) > cfg.clearance_relax
+    assert np.array_equal(checked.reshape(-1)[far], free.reshape(-1)[far])  # only near the contact
+    near_free = np.flatnonzero(checked.reshape(-1) & ~far)
+    assert near_free.size > 0
+    assert (ctx.carried_clearance(nodes[near_free]) >= 0.5 * cfg.carried_margin).all()
+    assert not (fields.obstacle_mask.reshape(-1)[near_free]).any()

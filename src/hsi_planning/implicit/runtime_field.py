@@ -3,6 +3,7 @@
 - :class:`SegmentContext`: what both segments of a plan share (fields, clearance, contact, held object).
 - :func:`fit_segment_latent` (Eq. 9) and :func:`remaining_time` (φ̂ = 1 / D̂_toa where needed).
 - :func:`wrist_free`: grid nodes the wrist may use (hand sphere and held object clear).
+- :func:`point_checked_free`: the free nodes near the contact by the held box's point clearance.
 - :func:`repair_field`: φ re-solved by fast marching with the learned speed 1/|∇φ̂| through the free nodes.
 - :func:`box_samples`, :func:`free_lift`: the held object's box and how far it can be lifted.
 
@@ -208,6 +209,27 @@ def wrist_free(ctx: SegmentContext, *, carrying: bool) -> Callable[[float], NDAr
         return np.asarray(ok)
 
     return free
+
+
+def point_checked_free(ctx: SegmentContext, free: NDArray[np.bool_], margin: float) -> NDArray[np.bool_]:
+    """``free`` (n, n, n) with the nodes within ``clearance_relax`` of the contact decided by the held box's
+    point-based clearance instead of the cell-dilated mask of :func:`wrist_free` (which errs on the safe
+    side by up to a cell and can leave no free node around a contact with little room to lift: a tall
+    object under a board). A node there is free when the hand sphere keeps ``hand_radius + margin``
+    (relaxed towards the contact) and the padded box keeps half of ``carried_margin``; the final path
+    check (:func:`hsi_planning.implicit.segment._violation`) still decides."""
+    cfg, fs = ctx.config, ctx.fields
+    grid = fs.grid
+    nodes = grid.points()
+    r = np.linalg.norm(nodes - ctx.contact, axis=1)
+    need = required_clearance(
+        r, cfg.hand_radius + margin, ctx.contact_clear, _MASK_RELAX * cfg.clearance_relax
+    )
+    hand_ok = ~blocked_nodes(fs).reshape(-1) & (fs.dist_o.reshape(-1) >= need)
+    sel = np.flatnonzero((r <= cfg.clearance_relax) & hand_ok)
+    out = free.copy().reshape(-1)
+    out[sel] = ctx.carried_clearance(nodes[sel]) >= 0.5 * cfg.carried_margin
+    return out.reshape(free.shape)
 
 
 def repair_field(

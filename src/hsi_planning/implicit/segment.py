@@ -34,6 +34,7 @@ from hsi_planning.implicit.runtime_field import (
     TOP_DOWN,
     UNDER_RADIUS,
     SegmentContext,
+    point_checked_free,
     repair_field,
     wrist_free,
 )
@@ -279,6 +280,26 @@ def _descend(
     return path, np.concatenate(speeds), learned_length
 
 
+def _repair(
+    phi: F64,
+    ctx: SegmentContext,
+    free: NDArray[np.bool_],
+    *,
+    margin: float,
+    carrying: bool,
+    prep: DescentField,
+) -> F64:
+    """:func:`repair_field` through ``free``; when carrying and the cell-accurate mask leaves no free node
+    around the contact, through :func:`point_checked_free` instead."""
+    try:
+        return repair_field(phi, ctx, free, prepared=prep)
+    except PlanningError:
+        if not carrying:
+            raise
+        _LOG.debug("no free node around the contact for the held box's cell mask; point check near it")
+        return repair_field(phi, ctx, point_checked_free(ctx, free, margin), prepared=prep)
+
+
 def plan_segment(
     phi: F64,
     ctx: SegmentContext,
@@ -314,7 +335,11 @@ def plan_segment(
     prepared = _Prepared(ctx.fields.grid, ctx.fields.config.unreachable_time)
     for kind, margin in attempts:
         free = free_at(margin)
-        repaired = functools.cache(lambda free=free: repair_field(phi, lifted, free, prepared=prepared(phi)))
+        repaired = functools.cache(
+            lambda free=free, margin=margin: _repair(
+                phi, lifted, free, margin=margin, carrying=carrying, prep=prepared(phi)
+            )
+        )
         try:
             field_used = phi if kind == "learned" else repaired()
             finish = repaired if kind == "learned" and cfg.repair != "never" else None
