@@ -29,7 +29,7 @@ $(PY):
 $(STAMP): pyproject.toml | $(PY)
 	@echo "[setup] installing Python packages into $(VENV) (first run takes a minute)"
 	@$(PY) -m pip install -q -e ".[dev,hw,ui]" 2>&1 | grep -v "^WARNING: Location" || true
-	@$(PY) -c "import hsi_planning, hsi_retarget, hsi_nodes, mujoco, open3d, torch" \
+	@$(PY) -c "import hsi_planning, hsi_retarget, hsi_nodes, mujoco, open3d, torch, pykdtree" \
 		|| { echo "[setup] import check failed"; exit 1; }
 	@touch $(STAMP)
 

@@ -26,6 +26,7 @@ from hsi_planning.fields import (
     voxelize,
 )
 from hsi_planning.fields.descent import descent_potential
+from hsi_planning.fields.nearest import NearestPoints
 from hsi_planning.trajectory import WristTrajectory
 
 CENTRE = np.array([0.5, 0.2, 0.9])
@@ -217,6 +218,24 @@ def test_obstacle_distance_matches_brute_force(wall_fields) -> None:
     got = fs.grid.interpolate(fs.dist_o, nodes)  # at nodes interpolation is the node value
     np.testing.assert_allclose(got, brute, rtol=1e-5, atol=1e-6)
     np.testing.assert_allclose(fs.grid.interpolate(fs.d_o, nodes), 1.0 / np.maximum(brute, 0.025), rtol=1e-5)
+
+
+def test_nearest_points_are_exact_bounded_and_copied() -> None:
+    rng = np.random.default_rng(5)
+    pts = rng.uniform(-0.3, 0.3, (2000, 3))
+    query = rng.uniform(-0.5, 0.5, (400, 3))
+    brute = np.min(np.linalg.norm(query[:, None, :] - pts[None, :, :], axis=2), axis=1)
+    nearest = NearestPoints(pts)
+    pts[:] = 10.0  # the set keeps its own copy
+    assert nearest.n_points == 2000
+    np.testing.assert_allclose(nearest.distance(query), brute, rtol=0, atol=1e-12)
+    bounded = nearest.distance(query, bound=0.05)
+    np.testing.assert_allclose(bounded, np.minimum(brute, 0.05), rtol=0, atol=1e-12)
+    assert nearest.distance(np.zeros((0, 3))).shape == (0,)
+    empty = NearestPoints(np.zeros((0, 3)))
+    assert np.isinf(empty.distance(query)).all() and (empty.distance(query, bound=0.1) == 0.1).all()
+    with pytest.raises(PlanningError, match="NaN"):
+        NearestPoints(np.array([[0.0, np.nan, 0.0]]))
 
 
 def test_sparse_wall_still_blocks_fast_marching(sphere_cloud) -> None:

@@ -16,10 +16,10 @@ import logging
 import numpy as np
 import skfmm
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial import cKDTree
 
 from hsi_planning.errors import PlanningError
 from hsi_planning.fields.grid import GridSpec
+from hsi_planning.fields.nearest import NearestPoints
 
 _LOG = logging.getLogger(__name__)
 
@@ -35,9 +35,7 @@ def point_distance(grid: GridSpec, points: ArrayLike) -> FloatArray:
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     if pts.shape[0] == 0:
         return np.full(grid.shape, np.inf)
-    tree = cKDTree(pts, balanced_tree=False, compact_nodes=False)  # faster to build, same answers
-    dist, _ = tree.query(grid.points(), k=1, workers=-1)  # the same answers on every core
-    return np.asarray(dist, dtype=np.float64).reshape(grid.shape)
+    return NearestPoints(pts).distance(grid.points()).reshape(grid.shape)
 
 
 def inverse_field(distance: NDArray[np.floating], floor: float, far: float) -> NDArray[np.float32]:

@@ -18,32 +18,24 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import PchipInterpolator
 from scipy.ndimage import gaussian_filter1d
-from scipy.spatial import cKDTree
 
 from hsi_planning.errors import PlanningError
+from hsi_planning.fields.nearest import NearestPoints
 
 F64 = NDArray[np.float64]
-#: [points] queries from which :class:`Clearance` searches on every core.
-_PARALLEL_QUERIES = 4096
 
 
 class Clearance:
     """Euclidean distance [m] to the nearest of ``obstacle_points`` (M, 3) [m] (inf without points)."""
 
     def __init__(self, obstacle_points: ArrayLike) -> None:
-        pts = np.asarray(obstacle_points, dtype=np.float64).reshape(-1, 3)
-        self.n_points = int(pts.shape[0])
-        self._tree = cKDTree(pts, balanced_tree=False, compact_nodes=False) if self.n_points else None
+        self._nearest = NearestPoints(obstacle_points)
+        self.n_points = self._nearest.n_points
 
     def __call__(self, points: ArrayLike, bound: float = np.inf) -> F64:
         """(N,) [m] distance of each of ``points`` (N, 3) to the nearest obstacle point; distances beyond
         ``bound`` [m] come back as ``bound`` (a bounded search is several times faster)."""
-        p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-        if self._tree is None:
-            return np.full(p.shape[0], bound)
-        workers = -1 if p.shape[0] >= _PARALLEL_QUERIES else 1  # threads pay off on large batches only
-        d, _ = self._tree.query(p, k=1, distance_upper_bound=bound, workers=workers)
-        return np.asarray(np.minimum(d, bound), dtype=np.float64)
+        return self._nearest.distance(points, bound)
 
     def segments_clear(
         self, a: ArrayLike, ends: ArrayLike, radius: float, step: float = 0.01
