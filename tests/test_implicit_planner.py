@@ -12,6 +12,7 @@ import json
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -20,6 +21,7 @@ from scipy.spatial.transform import Rotation
 
 from hsi_planning.errors import ConfigError, PlanningError
 from hsi_planning.fields.descent import descend_field
+from hsi_planning.implicit import segment as segment_module
 from hsi_planning.implicit.path import (
     Clearance,
     estimate_approach_axis,
@@ -267,6 +269,27 @@ def test_a_path_short_of_the_clearance_is_returned_only_within_relaxed_margin(ch
     assert info["failed_attempts"]  # every attempt was tried first
     default = ImplicitPlanner(checkpoint, ImplicitPlannerConfig(fit_steps=5))
     assert not default.plan(cloud, "can", "right", "grasp", START["right"]).info["path_approach"]["relaxed"]
+
+
+def test_each_safety_margin_is_repaired_once_per_segment(
+    checkpoint: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The learned attempt's fast-marching repair (where its descent stalls) is the field the first
+    repaired attempt uses: same margin, same free nodes, one fast marching."""
+    calls: list[tuple[bool, float]] = []  # (carrying: the leave of a grasp, margin [m])
+    real = segment_module._repair
+
+    def counted(phi: np.ndarray, ctx: Any, free: np.ndarray, **kw: Any) -> np.ndarray:
+        calls.append((kw["carrying"], round(kw["margin"], 6)))
+        return real(phi, ctx, free, **kw)
+
+    monkeypatch.setattr(segment_module, "_repair", counted)
+    strict = ImplicitPlannerConfig(check_margin=0.4, relaxed_margin=0.45, parallel_segments=False)
+    result = ImplicitPlanner(checkpoint, strict).plan(scene_cloud(), "can", "right", "grasp", START["right"])
+    attempts = len(result.info["path_approach"]["failed_attempts"])
+    assert attempts == strict.repair_retries + 2  # the learned one and every repaired margin failed
+    assert len(calls) >= strict.repair_retries + 1
+    assert len(calls) == len(set(calls)), f"a margin was repaired twice: {calls}"
 
 
 def test_the_lift_stops_under_a_board_above_the_held_object_not_beside_a_packed_neighbour() -> None:

@@ -15,7 +15,7 @@ TIMING_MODES: tuple[str, ...] = ("prior", "field")
 class ImplicitPlannerConfig:
     """Run-time settings of the implicit planner (defaults: ≤ 300 ms per plan on 2 cores)."""
 
-    fit_steps: int = 4  #: [steps] Adam steps of the latent fit (Eq. 9) per fitted segment
+    fit_steps: int = 2  #: [steps] Adam steps of the latent fit (Eq. 9) from the warm start per segment
     fit_lr: float = 2e-2  #: [1/step] learning rate of the latent fit
     fit_points: int = 512  #: [points] random grid points per fit step
     latent_reg: float = 1e-4  #: [-] λ of λ·||z||² in the fit

@@ -333,13 +333,19 @@ def plan_segment(
     lifted = dataclasses.replace(ctx, lift=ctx.lift if carrying else 0.0)
     free_at = wrist_free(lifted, carrying=carrying)
     prepared = _Prepared(ctx.fields.grid, ctx.fields.config.unreachable_time)
+    by_margin: dict[float, tuple[NDArray[np.bool_], Callable[[], F64]]] = {}  # learned and repaired share
     for kind, margin in attempts:
-        free = free_at(margin)
-        repaired = functools.cache(
-            lambda free=free, margin=margin: _repair(
-                phi, lifted, free, margin=margin, carrying=carrying, prep=prepared(phi)
+        if margin not in by_margin:
+            free_m = free_at(margin)
+            by_margin[margin] = (
+                free_m,
+                functools.cache(
+                    lambda free=free_m, margin=margin: _repair(
+                        phi, lifted, free, margin=margin, carrying=carrying, prep=prepared(phi)
+                    )
+                ),
             )
-        )
+        free, repaired = by_margin[margin]
         try:
             field_used = phi if kind == "learned" else repaired()
             finish = repaired if kind == "learned" and cfg.repair != "never" else None
