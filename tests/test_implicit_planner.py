@@ -514,3 +514,10 @@ def test_the_point_checked_free_mask_changes_only_nodes_near_the_contact_and_kee
     assert near_free.size > 0
     assert (ctx.carried_clearance(nodes[near_free]) >= 0.5 * cfg.carried_margin).all()
     assert not (fields.obstacle_mask.reshape(-1)[near_free]).any()
+    # Reaching down into a container, no node under the contact is freed (as in wrist_free).
+    down = dataclasses.replace(ctx, approach_axis=np.array([0.0, 0.0, 1.0]))
+    checked_down = point_checked_free(down, wrist_free(down, carrying=True)(0.01), 0.01).reshape(-1)
+    rel = nodes - contact
+    under = (np.linalg.norm(rel[:, :2], axis=1) <= 0.3) & (rel[:, 2] < -2.0 * fields.grid.resolution)
+    assert under.any() and not (checked_down & under).any()
+    assert (checked_down & ~far).any()

@@ -196,10 +196,7 @@ def wrist_free(ctx: SegmentContext, *, carrying: bool) -> Callable[[float], NDAr
     ).reshape(grid.shape)  # the vertical lift above the contact, where the object leaves its support
 
     relax = _MASK_RELAX * cfg.clearance_relax  # paths are longer than the straight distance r
-    axis = ctx.approach_axis
-    if axis is not None and float(axis[2]) > TOP_DOWN:  # reaching down into a container: not from under
-        under = (np.linalg.norm(rel[:, :2], axis=1) <= UNDER_RADIUS) & (rel[:, 2] < -2.0 * grid.resolution)
-        open_nodes = open_nodes & ~under.reshape(grid.shape)
+    open_nodes = open_nodes & ~_under_contact(ctx, rel).reshape(grid.shape)
 
     def free(margin: float) -> NDArray[np.bool_]:
         need = required_clearance(r, cfg.hand_radius + margin, ctx.contact_clear, relax)
@@ -209,6 +206,16 @@ def wrist_free(ctx: SegmentContext, *, carrying: bool) -> Callable[[float], NDAr
         return np.asarray(ok)
 
     return free
+
+
+def _under_contact(ctx: SegmentContext, rel: F64) -> NDArray[np.bool_]:
+    """(N,) nodes at ``rel`` (N, 3) [m] from the contact that lie under it when the hand reaches down into
+    a container (approach axis within ~45° of vertical; all False otherwise): the unseen rim and bottom."""
+    axis = ctx.approach_axis
+    if axis is None or float(axis[2]) <= TOP_DOWN:
+        return np.zeros(rel.shape[0], dtype=bool)
+    res = ctx.fields.grid.resolution
+    return np.asarray((np.linalg.norm(rel[:, :2], axis=1) <= UNDER_RADIUS) & (rel[:, 2] < -2.0 * res))
 
 
 def point_checked_free(ctx: SegmentContext, free: NDArray[np.bool_], margin: float) -> NDArray[np.bool_]:
@@ -226,6 +233,7 @@ def point_checked_free(ctx: SegmentContext, free: NDArray[np.bool_], margin: flo
         r, cfg.hand_radius + margin, ctx.contact_clear, _MASK_RELAX * cfg.clearance_relax
     )
     hand_ok = ~blocked_nodes(fs).reshape(-1) & (fs.dist_o.reshape(-1) >= need)
+    hand_ok &= ~_under_contact(ctx, nodes - ctx.contact)  # as in wrist_free: not under a top-down contact
     sel = np.flatnonzero((r <= cfg.clearance_relax) & hand_ok)
     out = free.copy().reshape(-1)
     out[sel] = ctx.carried_clearance(nodes[sel]) >= 0.5 * cfg.carried_margin
