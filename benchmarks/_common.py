@@ -165,7 +165,11 @@ def check_segment(
     from_contact = arc_length(ordered[::-1])[::-1]
     from_contact = from_contact if traj.segment == "approach" else from_contact[::-1]
     hand_d = field.distance(pos)
-    c_clear = float(field.distance(contact[None])[0])
+    # The segment's contact sample may stand up to CONTACT_TOLERANCE from the reference contact, and a
+    # distance changes by at most the displacement: what it must keep there is the reference contact's
+    # clearance less that offset (else a contact 5 mm off, 0.5 mm nearer a neighbour, "collides").
+    offset = float(np.linalg.norm(pos[traj.contact_index] - contact))
+    c_clear = float(field.distance(contact[None])[0]) - offset
     out = {"hand": float((hand_d - required_clearance(from_contact, hand_radius, c_clear, RELAX)).min())}
     near = np.linalg.norm(pos - contact, axis=1) <= SAFETY_RADIUS
     safety = [hand_d[near]]

@@ -22,8 +22,9 @@ labelled cloud and the approach axis from the spec. Checked against the **ground
   ``end_error_full`` per case and ``success (full-mesh contact)`` in the summary.
 - Within 10 cm of path before the contact the required clearance relaxes linearly to what the reference
   contact pose itself has (a wrist at a low object next to a board cannot keep 4 cm from it; the object
-  starts on its support). ``success (sphere)``: the same with the held object's bounding sphere
-  (centred on its box centre) instead of its mesh.
+  starts on its support), less the distance of the planned contact from the reference one (which the
+  2 cm tolerance allows; a distance changes by at most the displacement). ``success (sphere)``: the
+  same with the held object's bounding sphere (centred on its box centre) instead of its mesh.
 - safety distance: mean clearance of the hand and held object within 20 cm of the contact [m];
   unsmoothness: mean |acceleration| [m/s²]; RMS curvature [1/m]; path length [m]; planning time.
 

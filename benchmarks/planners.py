@@ -17,8 +17,9 @@ and success scoring are those of ``benchmarks/planner.py`` (see :mod:`_common`).
 Scores: success, unsmoothness (mean |a|), safety distance, RMS curvature, path length, planning time
 median/p95. Human-likeness of the approach (processed like the mocap) against the HDM05 ``grabHighR``
 reaches: normalized peak-speed time, max path deviation / distance, speed–curvature exponent, SPARC,
-LDLJ (|median_planner − median_HDM05| each) and the mean DTW distance of normalized trajectories to the
-HDM05 set. Writes ``planners.json``, ``planners.md``, ``planners_speed.png`` and ``planners_paths.png``.
+LDLJ (|median_planner − median_HDM05| each) and DTW: the median over plans of each plan's mean DTW
+distance of its normalized trajectory to the HDM05 set. Writes ``planners.json``, ``planners.md``,
+``planners_speed.png`` and ``planners_paths.png``.
 
 Usage: ``python benchmarks/planners.py [--quick] [--layouts 168] [--out benchmarks/results]``
 (also ``hsi bench planners``).

@@ -301,7 +301,7 @@ def test_the_lift_stops_under_a_board_above_the_held_object_not_beside_a_packed_
     wall = np.column_stack([np.full(ys.size, 0.546), ys.ravel(), zs.ravel()])  # 6 mm beside the box
     floor = np.column_stack([np.random.default_rng(0).uniform(0.3, 0.7, (400, 2)), np.full(400, 0.5)])
 
-    def lift(points: np.ndarray) -> float:
+    def lift(points: np.ndarray, slack: float = 0.0) -> float:
         clearance = Clearance(points)
         ctx = SegmentContext(
             fields=None,  # type: ignore[arg-type]  # not used by free_lift
@@ -312,13 +312,19 @@ def test_the_lift_stops_under_a_board_above_the_held_object_not_beside_a_packed_
             lift=0.0,
             config=ImplicitPlannerConfig(),
         )
-        return free_lift(ctx, points, 0.15, 0.0075)
+        return free_lift(ctx, points, 0.15, 0.0075, slack=slack)
 
     assert lift(np.vstack([wall, floor])) == pytest.approx(0.15)  # a packed neighbour does not stop it
     xs, ys = np.meshgrid(np.arange(0.3, 0.7, 0.01), np.arange(-0.2, 0.2, 0.01))
     board = np.column_stack([xs.ravel(), ys.ravel(), np.full(xs.size, 0.75)])  # 4 cm over the bottle
     room = 0.75 - 0.71 - 0.0075  # under the board, less the margin (box padded by 1 cm)
     assert room - 0.005 <= lift(np.vstack([wall, floor, board])) <= room
+    # A hidden top that may reach 1 cm higher keeps that top under the board too ...
+    assert room - 0.015 <= lift(np.vstack([wall, floor, board]), slack=0.01) <= room - 0.01
+    # ... and one that may reach the board slides out just off its support (never above the room).
+    hidden = ImplicitPlannerConfig().hidden_top_lift
+    assert hidden - 0.005 <= lift(np.vstack([wall, floor, board]), slack=0.2) <= hidden
+    assert lift(np.vstack([wall, floor]), slack=0.2) == pytest.approx(0.15)  # nothing above: no cap
 
 
 def test_plan_request_form_and_make_planner(checkpoint: Path) -> None:

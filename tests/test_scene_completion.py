@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from hsi_planning.implicit.completion import class_height, completed_bounds, top_seen
+from hsi_planning.implicit.completion import class_height, completed_bounds, top_seen, top_slack
 from hsi_planning.implicit.scene_completion import PANEL, complete_cloud, round_bounds
 from hsi_planning.perception import LabelledCloud
 from hsi_planning.planning import PlanRequest
@@ -149,6 +149,9 @@ def test_the_held_bottle_with_a_hidden_top_reaches_its_class_height_under_the_ce
     done, lab = complete_cloud(low_board, labels, CLASSES, exclude=[2], label_names=NAMES)
     lo, hi = completed_bounds(neck, furniture, "bottle", done[lab != 2])
     assert hi[2] == pytest.approx(0.88 - PANEL - 0.06, abs=1e-9)  # under the board's underside
+    # The top is still hidden: it may reach the class's largest height (what the lift must allow for).
+    assert top_slack(neck, (lo, hi), "bottle") == pytest.approx(lo[2] + class_height("bottle")[1] - hi[2])
+    assert top_slack(neck, (lo, hi), None) == 0.0
 
 
 def test_a_seen_top_face_is_not_extended() -> None:
@@ -156,8 +159,9 @@ def test_a_seen_top_face_is_not_extended() -> None:
     side = np.column_stack([np.full(30, 0.5), np.linspace(0.0, 0.06, 30), np.linspace(0.43, 0.55, 30)])
     box = np.vstack([top, side])
     assert top_seen(box)
-    _lo, hi = completed_bounds(box, np.zeros((0, 3)), "box", None)
+    lo, hi = completed_bounds(box, np.zeros((0, 3)), "box", None)
     assert hi[2] == pytest.approx(0.55)
+    assert top_slack(box, (lo, hi), "box") == 0.0  # its top was seen: no more height to allow for
 
 
 def test_plan_requests_complete_the_cloud_unless_told_not_to() -> None:

@@ -179,3 +179,14 @@ def completed_bounds(
             bottom = max(bottom, float(op[below, 2].max()))
         lo[2] = min(lo[2], bottom)
     return lo, hi
+
+
+def top_slack(target_points: ArrayLike, bounds: tuple[F64, F64], kind: str | None) -> float:
+    """[m] how far above the box ``bounds`` (lo (3,), hi (3,)) [m] the held object's top may still
+    reach: 0 when the cameras saw its top face or its class is unknown, else up to its class's largest
+    height above the box's bottom (a board in front of the cameras hides a tall bottle's top, and
+    :func:`completed_bounds` keeps ``CEILING_GAP`` under what is observed above it)."""
+    if kind not in DEFAULTS or top_seen(target_points):
+        return 0.0
+    lo, hi = bounds
+    return float(max(0.0, float(lo[2]) + class_height(kind)[1] - float(hi[2])))

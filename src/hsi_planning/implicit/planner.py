@@ -38,7 +38,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial.transform import Rotation
 
 from hsi_planning.errors import CloudError, PlanningError
-from hsi_planning.implicit.completion import completed_bounds, furniture_mask
+from hsi_planning.implicit.completion import completed_bounds, furniture_mask, top_slack
 from hsi_planning.implicit.latent import LatentFitConfig, fit_latent, predict_fields
 from hsi_planning.implicit.path import Clearance, estimate_approach_axis
 from hsi_planning.implicit.planner_config import ImplicitPlannerConfig
@@ -290,11 +290,13 @@ class ImplicitPlanner:
         )
         rise = clear_lift(obstacles, contact, ctx.carried, cfg.lift_pad, cfg.check_margin)
         lift = min(max(cfg.lift_height, rise), cfg.max_lift)
-        ctx = dataclasses.replace(ctx, lift=free_lift(ctx, obstacles, lift, cfg.check_margin))
+        slack = top_slack(target_pts, held, kind)
+        ctx = dataclasses.replace(ctx, lift=free_lift(ctx, obstacles, lift, cfg.check_margin, slack=slack))
         info: dict[str, Any] = {
             "approach_axis": np.asarray(axis).tolist(),
             "contact": contact.tolist(),
             "lift": ctx.lift,
+            "top_slack": slack,
             "held_bounds": [np.asarray(b).tolist() for b in held],
         }
         anchors = {"approach": w, "leave": retreat}

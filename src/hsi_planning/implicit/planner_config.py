@@ -52,6 +52,9 @@ class ImplicitPlannerConfig:
     )
     lift_height: float = 0.04  #: [m] least vertical lift (set-down) at a contact where an object is carried
     max_lift: float = 0.3  #: [m] the lift rises above neighbours and container walls up to this height
+    #: [m] lift of a held object whose hidden top may reach the ceiling observed above it (a bottle
+    #: under a shelf board slides out just off its support)
+    hidden_top_lift: float = 0.02
     #: [m] obstacles this far around the held object's footprint are risen above (walls hide what is
     #: behind them)
     lift_pad: float = 0.05
@@ -107,6 +110,7 @@ class ImplicitPlannerConfig:
             "speed_smoothing",
             "lift_height",
             "max_lift",
+            "hidden_top_lift",
             "lift_pad",
             "crop_margin",
         )

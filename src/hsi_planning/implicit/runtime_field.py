@@ -13,6 +13,7 @@ a leave (see :mod:`hsi_planning.implicit.segment`).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -297,20 +298,14 @@ def clear_lift(obstacle_points: F64, contact: F64, carried: F64, pad: float, mar
     return float(max(0.0, pts[near, 2].max() - lo[2] + margin)) if near.any() else 0.0
 
 
-def free_lift(
-    ctx: SegmentContext, obstacle_points: F64, lift: float, margin: float, step: float = 0.005
-) -> float:
-    """[m] the largest vertical lift ≤ ``lift`` of the held object from the contact that keeps the top of
-    its box ``margin`` [m] under the lowest of ``obstacle_points`` (K, 3) [m] above its unpadded
-    footprint (a shelf board or lid right above it; walls and neighbours beside it, whose points also
-    stand below its top, do not stop a vertical lift), and the hand sphere as clear as a path there
-    must keep (relaxed towards the contact)."""
-    cfg = ctx.config
-    heights = np.arange(step, lift + 1e-9, step)
-    wrist = ctx.contact + heights[:, None] * np.array([0.0, 0.0, 1.0])
+def _ceiling_room(ctx: SegmentContext, obstacle_points: F64, margin: float) -> float:
+    """[m] how far the top of the held object's box can rise until it is ``margin`` [m] under the lowest
+    of ``obstacle_points`` (K, 3) [m] above its unpadded footprint (a shelf board or lid); walls and
+    neighbours beside it, whose points also stand below its top, are not a ceiling; ``inf`` when nothing
+    is above it."""
     lo, hi = ctx.contact + ctx.carried.min(axis=0), ctx.contact + ctx.carried.max(axis=0)
     pts = np.asarray(obstacle_points, dtype=np.float64).reshape(-1, 3)
-    pad = cfg.carried_padding  # over the object itself, not over its padding (where neighbours stand)
+    pad = ctx.config.carried_padding  # over the object itself, not over its padding (neighbours stand there)
     pts = pts[(pts[:, :2] >= lo[:2] + pad).all(axis=1) & (pts[:, :2] <= hi[:2] - pad).all(axis=1)]
     # A wall or neighbour reaching into the footprint also has points beside the box, below its top: its
     # columns (``_COLUMN`` cells) are not a ceiling.
@@ -318,7 +313,31 @@ def free_lift(
     beside = (pts[:, 2] <= hi[2]) & (pts[:, 2] >= lo[2] + _UPPER)
     walls = np.isin(cells @ np.array([1, 1 << 32]), (cells[beside] @ np.array([1, 1 << 32])))
     over = (pts[:, 2] > hi[2]) & ~walls
-    room = float(pts[over, 2].min() - hi[2] - margin) if over.any() else np.inf
+    return float(pts[over, 2].min() - hi[2] - margin) if over.any() else math.inf
+
+
+def free_lift(
+    ctx: SegmentContext,
+    obstacle_points: F64,
+    lift: float,
+    margin: float,
+    *,
+    step: float = 0.005,
+    slack: float = 0.0,
+) -> float:
+    """[m] the largest vertical lift ≤ ``lift`` of the held object from the contact that keeps the top of
+    its box ``margin`` [m] under the lowest of ``obstacle_points`` (K, 3) [m] above its unpadded
+    footprint (a shelf board or lid right above it; walls and neighbours beside it, whose points also
+    stand below its top, do not stop a vertical lift), and the hand sphere as clear as a path there
+    must keep (relaxed towards the contact). When the object's hidden top may reach ``slack`` [m] above
+    its box (:func:`~hsi_planning.implicit.completion.top_slack`), the lift keeps that higher top under
+    the ceiling too, but is allowed ``hidden_top_lift`` (a slide just off the support)."""
+    cfg = ctx.config
+    heights = np.arange(step, lift + 1e-9, step)
+    wrist = ctx.contact + heights[:, None] * np.array([0.0, 0.0, 1.0])
+    room = _ceiling_room(ctx, obstacle_points, margin)
+    if slack > 0.0 and math.isfinite(room):
+        room = min(room, max(room - slack, cfg.hidden_top_lift))
     need = required_clearance(heights, cfg.hand_radius + margin, ctx.contact_clear, cfg.clearance_relax)
     blocked = np.flatnonzero((heights > room) | (ctx.clearance(wrist) < need))
     return float(lift if blocked.shape[0] == 0 else heights[blocked[0]] - step)
