@@ -83,3 +83,40 @@ def test_bench_planners_quick(tmp_path: Path, repo_root: Path) -> None:
         image = np.asarray(iio.imread(tmp_path / name))
         assert image.ndim == 3 and image.shape[0] > 200 and image.shape[1] > 400, name
         assert image[..., :3].std() > 5.0, name  # not blank
+
+
+def test_the_contact_clearance_rule_allows_for_the_contact_tolerance(repo_root: Path) -> None:
+    import sys
+
+    import trimesh
+
+    from hsi_planning.demos import ObstacleField
+    from hsi_planning.trajectory import WristTrajectory
+
+    sys.path.insert(0, str(repo_root / "benchmarks"))
+    try:
+        from _common import CONTACT_TOLERANCE, check_segment
+    finally:
+        sys.path.remove(str(repo_root / "benchmarks"))
+    wall = trimesh.creation.box((0.1, 1.0, 1.0))  # faces at x = ±0.05
+    field = ObstacleField({"wall": wall})
+    contact = np.array([0.065, 0.0, 0.0])  # the reference contact: 15 mm from the wall
+
+    def margin(end_x: float) -> float:
+        xs = np.linspace(0.5, end_x, 60)  # a straight approach along -x
+        pos = np.column_stack([xs, np.zeros(60), np.zeros(60)])
+        quat = np.tile([0.0, 0.0, 0.0, 1.0], (60, 1))
+        traj = WristTrajectory(np.linspace(0.0, 1.0, 60), pos, quat)
+        return check_segment(traj, field, contact, 0.04, None)["hand"]
+
+    assert margin(0.065) >= 0.0  # at the reference contact: its own clearance is allowed
+    assert CONTACT_TOLERANCE > 0.005
+    assert margin(0.060) >= 0.0  # 5 mm off (within the tolerance), 5 mm nearer: allowed (was a failure)
+    assert margin(0.080) >= 0.0  # 15 mm short of it, farther from the wall: fine
+    # A path that dips nearer the wall before its end is still caught:
+    xs = np.linspace(0.5, 0.065, 60)
+    pos = np.column_stack([xs, np.zeros(60), np.zeros(60)])
+    pos[45:55, 0] = 0.052  # 2 mm from the wall, short of the contact
+    quat = np.tile([0.0, 0.0, 0.0, 1.0], (60, 1))
+    traj = WristTrajectory(np.linspace(0.0, 1.0, 60), pos, quat)
+    assert check_segment(traj, field, contact, 0.04, None)["hand"] < 0.0
