@@ -52,8 +52,8 @@ def test_culled_rows_and_clearance_equal_the_full_check(name: str, kitchen: Scen
     config = IKConfig()
     solver = IKSolver(robot, config, kitchen)
     spheres, pairs = solver.spheres, solver.spheres.pairs()
-    bounds = LinkBounds(spheres, pairs)
-    assert bounds.link_pairs.shape[0] < pairs.shape[0]
+    bounds = LinkBounds(spheres)
+    assert bounds.frame_ids.shape[0] < spheres.radii.shape[0]
     data = robot.model.createData()
     rng = np.random.default_rng(11)
     margins = (config.scene_margin, config.tip_margin, config.self_margin)
@@ -160,3 +160,38 @@ def test_an_opened_drawer_is_an_obstacle_while_it_stands_open_except_for_its_hol
     with pytest.raises(RetargetError, match="holder"):
         solver.set_part_scene(phase.scene, "middle")
     assert opened_part(SimpleNamespace(info={}, keyframes=keys), spec) is None  # type: ignore[arg-type]
+
+
+def test_the_opened_part_constrains_the_ik_steps_of_the_spheres_that_heed_it() -> None:
+    import trimesh
+
+    robot = RobotModel("dual_ur5e")
+    config = IKConfig()
+    solver = IKSolver(robot, config)  # no scene: only the part layer can add scene rows
+    q = np.array(robot.q_home)
+    centres = solver.sphere_centers(q)
+    left = solver.spheres.of("left")
+    tip = int(left[np.argmax(centres[left, 0])])  # the left arm's foremost sphere
+    box = trimesh.creation.box(extents=(0.05, 0.3, 0.3))
+    box.apply_translation(centres[tip] + [solver.spheres.radii[tip] + config.scene_margin + 0.05, 0.0, 0.0])
+    part = SceneDistance({"door": box})
+    data = robot.model.createData()
+    pin.computeJointJacobians(robot.model, data, q)
+    pin.updateFramePlacements(robot.model, data)
+    margins = (config.scene_margin, config.tip_margin, config.self_margin)
+    kwargs = dict(margins=margins, activation=config.activation_distance, gain=0.5, max_rows=1000)
+    none = np.zeros((0, 2), dtype=np.int64)
+    heed_all = np.ones(solver.spheres.radii.shape[0], dtype=bool)
+    rows, lower, gap = collision_rows(
+        robot.model, data, solver.spheres, none, None, extra=(part, heed_all), **kwargs
+    )  # type: ignore[arg-type]
+    assert rows.shape[0] >= 1 and gap == pytest.approx(0.05, abs=0.02)  # the part is ~5 cm beyond the margin
+    assert np.all(lower < 0.0)  # a velocity damper: the step may close part of the gap, not more
+    heed_right = solver.spheres.groups != 0  # the left hand holds it: its spheres are exempt
+    assert (
+        rows.shape[0]
+        > collision_rows(robot.model, data, solver.spheres, none, None, extra=(part, heed_right), **kwargs)[
+            0
+        ].shape[0]
+    )  # type: ignore[arg-type]
+    assert collision_rows(robot.model, data, solver.spheres, none, None, **kwargs)[0].shape[0] == 0  # type: ignore[arg-type]

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
+from scipy.spatial.distance import cdist
 
 from hsi_planning.errors import RetargetError
 from hsi_retarget.culling import LinkBounds
@@ -34,6 +35,9 @@ _BODY = GROUPS.index("body")
 SceneLayer = tuple[SceneDistance, NDArray[np.bool_]]
 EDGE_RADIUS = 0.05  #: [m] spheres along the edges of a big body box (:func:`_edge_columns`)
 EDGE_MIN_HALF = 0.1  #: [m] smallest half extent of a body box that gets edge columns
+#: [m] the pre-filter of sphere pairs keeps this much more than the activation (its distances round
+#: differently from the exact ones computed after it)
+_FILTER_TOLERANCE = 1e-9
 
 
 @dataclass(frozen=True, eq=False)
@@ -255,10 +259,10 @@ def collision_rows(
     near the scene and every pair of ``pairs`` (P, 2) closer than ``activation`` [m] beyond its margin
     (``margins`` = scene, finger tip, self [m]) is a candidate; the ``max_rows`` closest get a row
     ``n^T (J_a - J_b) dq >= -gain (d - margin)`` (a velocity damper: one step closes at most ``gain`` of the
-    gap). ``bounds`` (built from the same spheres and ``pairs``) skips the links that cannot be near (same
-    result, cheaper). ``extra`` = (scene, spheres (S,) that heed it): one more scene, e.g. an opened door
-    that one hand holds. Returns A (k, nv), lower (k,) and the smallest gap [m] (``inf`` without
-    candidates).
+    gap). ``bounds`` (built from the same spheres) skips the links that cannot be near the scene, and all
+    sphere-centre distances at once pick the pairs that may be near (same result, cheaper). ``extra`` =
+    (scene, spheres (S,) that heed it): one more scene, e.g. an opened door that one hand holds. Returns
+    A (k, nv), lower (k,) and the smallest gap [m] (``inf`` without candidates).
     """
     links, centers = bounds.world(data, spheres) if bounds is not None else (None, spheres.world(data))
     ia, ib, gaps, dirs = _candidates(
@@ -270,6 +274,7 @@ def collision_rows(
         activation=activation,
         bounds=bounds,
         links=links,
+        extra=extra,
     )
     if gaps.size == 0:
         return np.zeros((0, model.nv)), np.zeros(0), math.inf
@@ -342,10 +347,11 @@ def _candidates(
         second.append(np.full(near.shape, -1))
         slacks.append(slack[near])
         directions.append(normal[near])
-    if links is not None and bounds is not None and np.isfinite(activation):
-        pairs = bounds.near_pairs(links, activation + self_margin)
     if pairs.shape[0]:
         a, b = pairs[:, 0], pairs[:, 1]
+        if np.isfinite(activation):  # every centre distance at once (C), then the pairs that may be near
+            gap = cdist(centers, centers)[a, b] - spheres.radii[a] - spheres.radii[b] - self_margin
+            a, b = a[gap < activation + _FILTER_TOLERANCE], b[gap < activation + _FILTER_TOLERANCE]
         delta = centers[a] - centers[b]
         norm = np.linalg.norm(delta, axis=1)
         slack = norm - spheres.radii[a] - spheres.radii[b] - self_margin

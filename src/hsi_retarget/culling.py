@@ -1,11 +1,11 @@
-"""Exact culling of the IK's collision candidates by a bounding sphere per robot link.
+"""Exact culling of the IK's scene collision candidates by a bounding sphere per robot link.
 
 Every link frame that carries collision spheres gets the smallest-radius-about-the-mean sphere that holds
 all of them. Distances are 1-Lipschitz, so a link whose bounding sphere is farther than the activation
-distance from the scene (or from another link) cannot have a sphere (or a sphere pair) closer than that:
-only the spheres of near links are queried against the scene, and only the sphere pairs of near link pairs
-are measured. The result is the same as checking every sphere and pair; it is just cheaper (a dual-arm
-robot has ~180 spheres and ~9000 self-collision pairs, of which a few dozen are ever near).
+distance from the scene cannot have a sphere closer than that: only the spheres of near links are queried
+against the scene. The result is the same as querying every sphere; it is just cheaper. (Self-collision
+pairs, ~9000 on the dual-arm robot, are filtered by one matrix of all sphere-centre distances instead:
+:func:`hsi_retarget.collision.collision_rows`.)
 """
 
 from __future__ import annotations
@@ -25,10 +25,9 @@ I64 = NDArray[np.int64]
 
 
 class LinkBounds:
-    """Bounding spheres of the links of a :class:`~hsi_retarget.collision.SphereSet` and the grouping of
-    its self-collision ``pairs`` (P, 2) by link pair."""
+    """Bounding spheres of the links of a :class:`~hsi_retarget.collision.SphereSet`."""
 
-    def __init__(self, spheres: SphereSet, pairs: I64) -> None:
+    def __init__(self, spheres: SphereSet) -> None:
         unique, owner = np.unique(spheres.frame_ids, return_inverse=True)
         self.frame_ids: I64 = unique.astype(np.int64)  #: (F,) pinocchio frame of each link
         self.owner: I64 = owner.astype(np.int64)  #: (S,) link index of each sphere
@@ -41,11 +40,6 @@ class LinkBounds:
             radii[f] = reach.max()
         self.centers: F64 = centers  #: (F, 3) [m] bounding centres in the link frames
         self.radii: F64 = radii  #: (F,) [m] bounding radii (sphere radii included)
-        self.pairs: I64 = np.array(pairs, dtype=np.int64).reshape(-1, 2)
-        n = unique.shape[0]
-        key = owner[self.pairs[:, 0]] * n + owner[self.pairs[:, 1]]
-        links, self._pair_group = np.unique(key, return_inverse=True)
-        self.link_pairs: I64 = np.stack([links // n, links % n], axis=1).astype(np.int64)  #: (G, 2)
 
     def world(self, data: pin.Data, spheres: SphereSet) -> tuple[F64, F64]:
         """(F, 3) [m] bounding centres and (S, 3) [m] centres of ``spheres`` (those the bounds were built
@@ -62,9 +56,3 @@ class LinkBounds:
         the scene."""
         near = scene.lower_bound(link_centers) - self.radii < reach
         return np.asarray(near[self.owner])
-
-    def near_pairs(self, link_centers: F64, reach: float) -> I64:
-        """(P', 2) the pairs whose two links' bounding spheres are within ``reach`` [m] of each other."""
-        a, b = self.link_pairs[:, 0], self.link_pairs[:, 1]
-        gap = np.linalg.norm(link_centers[a] - link_centers[b], axis=1) - self.radii[a] - self.radii[b]
-        return np.asarray(self.pairs[(gap < reach)[self._pair_group]], dtype=np.int64)

@@ -157,8 +157,7 @@ class IKSolver:
         }
         self.spheres = robot_spheres(robot)
         self._pairs = self.spheres.pairs()
-        checked = self._pairs if self.config.self_collision else self._pairs[:0]
-        self._bounds = LinkBounds(self.spheres, checked)
+        self._bounds = LinkBounds(self.spheres)
         self._layer: SceneLayer | None = None
         self._v_max = np.array(robot.v_max)
         self._jq = np.array([robot.q_index(n) for n in robot.joint_names], dtype=np.int64)
