@@ -365,6 +365,13 @@ class IKSolver:
         )
         return gap if gap < cfg.activation_distance else math.inf
 
+    def clearance_bound(self, q_from: F64, q_to: F64, clearance_from: float) -> float:
+        """[m] a lower bound of :meth:`clearance` at ``q_to`` (nq,) from its value ``clearance_from`` [m]
+        at ``q_from`` (nq,): no sphere moved farther than the largest centre displacement, and a gap
+        between two spheres closes by at most twice that (distances are 1-Lipschitz)."""
+        moved = float(np.linalg.norm(self.sphere_centers(q_to) - self.sphere_centers(q_from), axis=1).max())
+        return clearance_from - 2.0 * moved
+
     def errors(self, q: F64, targets: IKTargets) -> tuple[dict[str, float], dict[str, float]]:
         """TCP position [m] and orientation [rad] errors per side with a goal."""
         pin.framesForwardKinematics(self._model, self._data, np.asarray(q, dtype=np.float64))

@@ -235,6 +235,8 @@ def track(
                     break
             # a large step can cut into a margin beyond its linearization: push back out on this frame
             extra = cfg.repair_iterations if info.min_clearance < 0.01 else 0
+            if extra and solver.clearance_bound(q_prev, q, info.min_clearance) > -cfg.repair_depth:
+                extra = 0  # the last step cannot have cut that deep: skip the full clearance query
             while extra > 0 and solver.clearance(q) < -cfg.repair_depth:
                 q, info = solver.step(q, targets, dt, q_start)
                 extra -= 1
