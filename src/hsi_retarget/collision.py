@@ -351,7 +351,8 @@ def _candidates(
         a, b = pairs[:, 0], pairs[:, 1]
         if np.isfinite(activation):  # every centre distance at once (C), then the pairs that may be near
             gap = cdist(centers, centers)[a, b] - spheres.radii[a] - spheres.radii[b] - self_margin
-            a, b = a[gap < activation + _FILTER_TOLERANCE], b[gap < activation + _FILTER_TOLERANCE]
+            maybe = gap < activation + _FILTER_TOLERANCE
+            a, b = a[maybe], b[maybe]
         delta = centers[a] - centers[b]
         norm = np.linalg.norm(delta, axis=1)
         slack = norm - spheres.radii[a] - spheres.radii[b] - self_margin
