@@ -259,10 +259,10 @@ def collision_rows(
     near the scene and every pair of ``pairs`` (P, 2) closer than ``activation`` [m] beyond its margin
     (``margins`` = scene, finger tip, self [m]) is a candidate; the ``max_rows`` closest get a row
     ``n^T (J_a - J_b) dq >= -gain (d - margin)`` (a velocity damper: one step closes at most ``gain`` of the
-    gap). ``bounds`` (built from the same spheres) skips the links that cannot be near the scene, and all
-    sphere-centre distances at once pick the pairs that may be near (same result, cheaper). ``extra`` =
-    (scene, spheres (S,) that heed it): one more scene, e.g. an opened door that one hand holds. Returns
-    A (k, nv), lower (k,) and the smallest gap [m] (``inf`` without candidates).
+    gap). The pairs that may be near are picked from all sphere-centre distances at once, and ``bounds``
+    (built from the same spheres) skips the links that cannot be near the scene (same result, cheaper).
+    ``extra`` = (scene, spheres (S,) that heed it): one more scene, e.g. an opened door that one hand
+    holds. Returns A (k, nv), lower (k,) and the smallest gap [m] (``inf`` without candidates).
     """
     links, centers = bounds.world(data, spheres) if bounds is not None else (None, spheres.world(data))
     ia, ib, gaps, dirs = _candidates(
