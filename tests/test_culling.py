@@ -74,6 +74,8 @@ def test_culled_rows_and_clearance_equal_the_full_check(name: str, kitchen: Scen
         full = collision_rows(robot.model, data, spheres, pairs, kitchen, **kwargs)  # type: ignore[arg-type]
         culled = collision_rows(robot.model, data, spheres, pairs, kitchen, bounds=bounds, **kwargs)  # type: ignore[arg-type]
         assert full[0].shape == culled[0].shape
+        none = collision_rows(robot.model, data, spheres, pairs, kitchen, **{**kwargs, "max_rows": 0})  # type: ignore[arg-type]
+        assert none[0].shape == (0, robot.model.nv) and none[2] == full[2]  # no rows, the same gap
         order_f, order_c = np.lexsort(full[0].T), np.lexsort(culled[0].T)
         assert np.allclose(full[0][order_f], culled[0][order_c], atol=1e-9)
         assert np.allclose(full[1][order_f], culled[1][order_c], atol=1e-9)

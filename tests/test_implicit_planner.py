@@ -527,3 +527,41 @@ def test_the_point_checked_free_mask_changes_only_nodes_near_the_contact_and_kee
     under = (np.linalg.norm(rel[:, :2], axis=1) <= 0.3) & (rel[:, 2] < -2.0 * fields.grid.resolution)
     assert under.any() and not (checked_down & under).any()
     assert (checked_down & ~far).any()
+
+
+def test_the_empty_hand_is_kept_from_reaching_past_its_target(planner: ImplicitPlanner) -> None:
+    """Beyond the contact along the approach axis, a path may not come nearer the target than the contact
+    (less ``target_slack``); in front of the contact it may, and a carrying path is not held to it."""
+    cloud = scene_cloud()
+    problem = make_problem(
+        cloud.points, cloud.labels, [2], hand="right", action="grasp", segment="approach", approach_axis=AXIS
+    )
+    contact = contact_point(problem.target_points, AXIS, 0.06)
+    clearance = Clearance(cloud.points[cloud.labels != 2])
+    ctx = SegmentContext(
+        fields=problem_fields(problem),
+        clearance=clearance,
+        contact=contact,
+        contact_clear=float(clearance(contact)[0]),
+        carried=np.zeros((1, 3)),
+        lift=0.0,
+        config=planner.config,
+        approach_axis=np.asarray(AXIS, dtype=np.float64),
+        target=Clearance(problem.target_points),
+    )
+    axis = np.asarray(AXIS, dtype=np.float64)
+    straight = contact + np.linspace(0.15, 0.0, 16)[:, None] * axis  # straight in along the axis
+    clear_in, _ = segment_module._violation(straight, ctx, carrying=False)
+    past = np.vstack([straight[:-1], contact - 0.05 * axis, contact])  # 5 cm deeper, then back out
+    clear_past, where = segment_module._violation(past, ctx, carrying=False)
+    assert clear_past < 0.0 and "nearer the target" in where
+    assert clear_past < clear_in
+    no_rule = dataclasses.replace(ctx, target=None)
+    assert segment_module._violation(past, no_rule, carrying=False)[0] > clear_past
+    # the planner's own approach keeps the rule
+    result = planner.plan(cloud, "can", "right", "grasp", START["right"])  # type: ignore[arg-type]
+    a = result.approach.position
+    depth = (a - contact) @ axis
+    near = Clearance(problem.target_points)(a)
+    beyond = depth < 0.0
+    assert np.all(near[beyond] >= ctx.target_clear - planner.config.target_slack - 1e-9)

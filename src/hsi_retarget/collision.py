@@ -278,6 +278,8 @@ def collision_rows(
     )
     if gaps.size == 0:
         return np.zeros((0, model.nv)), np.zeros(0), math.inf
+    if max_rows <= 0:  # no rows asked for: the smallest gap is still reported
+        return np.zeros((0, model.nv)), np.zeros(0), float(gaps.min())
     order = np.argsort(gaps)[:max_rows]
     ia, ib, dirs = ia[order], ib[order], dirs[order]
     rows = _point_rows(model, data, spheres, centers, idx=ia, dirs=dirs)

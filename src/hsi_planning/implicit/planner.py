@@ -287,6 +287,7 @@ class ImplicitPlanner:
             lift=0.0,
             config=cfg,
             approach_axis=np.asarray(axis, dtype=np.float64),
+            target=Clearance(target_pts),
         )
         rise = clear_lift(obstacles, contact, ctx.carried, cfg.lift_pad, cfg.check_margin)
         lift = min(max(cfg.lift_height, rise), cfg.max_lift)

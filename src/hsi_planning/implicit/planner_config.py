@@ -30,6 +30,10 @@ class ImplicitPlannerConfig:
     repair_margin_step: float = 0.01  #: [m] growth of the margin per repair retry
     clearance_relax: float = 0.10  #: [m] arc length before the contact over which clearance relaxes
     check_margin: float = 0.0075  #: [m] extra clearance the final path keeps from the observed points
+    #: [m] beyond the contact along the approach axis, an empty hand comes at most this much closer to
+    #: the target's points than at the contact (it does not reach past or around the object it grasps
+    #: or has just put down)
+    target_slack: float = 0.02
     #: [m] when no attempt keeps the full clearance, the closest one is still returned (logged) if it
     #: misses it by at most this much (the hand sphere itself, without ``check_margin``, stays clear)
     relaxed_margin: float = 0.0075
@@ -104,6 +108,7 @@ class ImplicitPlannerConfig:
             "carried_padding",
             "carried_margin",
             "check_margin",
+            "target_slack",
             "relaxed_margin",
             "start_clearance",
             "path_smoothing",

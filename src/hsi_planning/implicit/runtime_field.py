@@ -60,6 +60,7 @@ class SegmentContext:
         lift: [m] vertical lift (set-down) at the contact when carrying.
         config: planner settings.
         approach_axis: (3,) direction out of the container opening (None: unknown).
+        target: distances to the target's points (None: the empty hand is not kept off the target).
     """
 
     fields: FieldSet
@@ -70,6 +71,12 @@ class SegmentContext:
     lift: float
     config: ImplicitPlannerConfig
     approach_axis: F64 | None = None
+    target: Clearance | None = None
+
+    @property
+    def target_clear(self) -> float:
+        """[m] the contact's distance to the target's points (inf without ``target``)."""
+        return float(self.target(self.contact[None])[0]) if self.target is not None else float("inf")
 
     def carried_clearance(self, wrist: F64, upper: bool = False) -> F64:
         """(N,) [m] observed clearance of the held object's box with the wrist at ``wrist`` (N, 3), at most

@@ -80,6 +80,13 @@ def _violation(positions: F64, ctx: SegmentContext, carrying: bool) -> tuple[flo
         obj[lifting] = ctx.carried_clearance(positions[lifting], upper=True)
         if obj.min() < margins.min():
             margins, what = obj, "the carried object"
+    elif ctx.target is not None and ctx.approach_axis is not None:  # the empty hand: not past the target
+        floor = ctx.target_clear - cfg.target_slack
+        near = ctx.target(positions, bound=floor + 0.01) - floor
+        axis = ctx.approach_axis / max(float(np.linalg.norm(ctx.approach_axis)), 1e-9)
+        near = np.maximum(near, (positions - ctx.contact) @ axis)  # (in front of the contact: free)
+        if near.min() < margins.min():
+            margins, what = near, "the hand (nearer the target than at the contact)"
     i = int(np.argmin(margins))
     where = f"{what} at {positions[i].round(3).tolist()} [m], {from_contact[i]:.2f} m from the contact"
     return float(margins[i]), where

@@ -35,6 +35,9 @@ class GraspConfig:
     tcp_distance_m: float = 0.004  #: TCP-to-target surface distance that counts as touching [m]
     timeout_s: float = 1.5  #: a pending grasp fails after this time without contact [s]
     release_grace_s: float = 0.5  #: hand-target contacts stay allowed this long after a release [s]
+    #: the fingers stop where they are when the weld is made (a force-limited gripper), instead of
+    #: squeezing on to the closed stop against the weld [-]
+    stop_fingers: bool = True
 
     def __post_init__(self) -> None:
         for name in ("tcp_distance_m", "timeout_s", "release_grace_s"):
@@ -138,6 +141,10 @@ class GraspController:
             how = self._touch(hand, target)
             if how:
                 self._weld(hand, target)
+                if self.config.stop_fingers:  # a force-limited gripper stops on the object
+                    stop = self._finger_now.get(hand)
+                    if stop is not None:
+                        self.finger_command[hand] = stop
                 del self.pending[hand]
                 self.records.append(GraspRecord(time, hand, target, "grasp", how))
             elif time - since > self.config.timeout_s:
