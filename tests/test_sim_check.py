@@ -264,6 +264,31 @@ def test_pick_lifts_by_weld_on_contact_and_release_places(world: SimWorld) -> No
     assert report.collisions == 0 and report.max_tracking_error_m < 0.01
 
 
+def test_the_fingers_stop_on_the_object_when_the_weld_is_made(world: SimWorld) -> None:
+    """A force-limited gripper: once welded, the finger targets stay where the fingers met the can (they
+    do not squeeze on to the closed stop against the weld), and the held can stays upright."""
+    traj = _pick_script(world, "can1", PLACE).build()
+    fingers = np.flatnonzero(np.isin(np.asarray(world.map.ctrl_q), world.finger_q["left"]))
+    act = np.asarray(world.map.ctrl_adr)[fingers]
+    closed = float(world.robot.q_lower[world.finger_q["left"][0]])
+    log: list[tuple[float, float, float]] = []
+
+    def record(w: SimWorld) -> None:
+        _, qx, qy, _ = w.object_pose("can1")[3:]
+        tilt = math.degrees(math.acos(min(1.0, max(-1.0, 1.0 - 2.0 * (qx * qx + qy * qy)))))
+        log.append((w.time, float(w.data.ctrl[act].min()), tilt))
+
+    report = execute(world, traj, goal=TaskGoal("can1", PLACE), on_frame=record)
+    grasp, release = report.grasps[0], report.grasps[1]
+    t, ctrl, tilt = np.array(log).T
+    t -= t[0]
+    held = (t > grasp.time_s + 0.05) & (t < release.time_s - 0.05)
+    assert held.any() and np.ptp(ctrl[held]) < 1e-9  # the targets stopped at the weld
+    assert ctrl[held].min() > closed + 0.01  # on the can (6.6 cm), not at the closed stop
+    assert tilt[held].max() < 3.0
+    assert report.success
+
+
 def test_a_held_object_stays_held_across_executions(world: SimWorld) -> None:
     grip, goal = _up(world.object_pose("can1")[:3], 0.09), _up(np.asarray(PLACE), 0.09)
     first = Script(world).move("left", _pose(TOP, _up(grip, 0.1)), 1.2).move("left", _pose(TOP, grip), 0.8)
