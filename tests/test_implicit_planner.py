@@ -173,16 +173,15 @@ def test_approach_axis_estimate_points_out_of_the_opening() -> None:
 # ---------------------------------------------------------------------------------- the planner
 
 
-def test_descent_on_the_predicted_field_reaches_the_goal(planner: ImplicitPlanner) -> None:
-    cloud = scene_cloud()
+def _can_context(cloud: LabelledCloud, planner: ImplicitPlanner) -> tuple[Any, SegmentContext]:
+    """(problem, segment context) of the right hand grasping the fixture's can (label 2) along AXIS."""
     problem = make_problem(
         cloud.points, cloud.labels, [2], hand="right", action="grasp", segment="approach", approach_axis=AXIS
     )
-    fields = problem_fields(problem)
     contact = contact_point(problem.target_points, AXIS, 0.06)
     clearance = Clearance(cloud.points[cloud.labels != 2])
     ctx = SegmentContext(
-        fields=fields,
+        fields=problem_fields(problem),
         clearance=clearance,
         contact=contact,
         contact_clear=float(clearance(contact)[0]),
@@ -190,6 +189,13 @@ def test_descent_on_the_predicted_field_reaches_the_goal(planner: ImplicitPlanne
         lift=0.0,
         config=planner.config,
     )
+    return problem, ctx
+
+
+def test_descent_on_the_predicted_field_reaches_the_goal(planner: ImplicitPlanner) -> None:
+    cloud = scene_cloud()
+    problem, ctx = _can_context(cloud, planner)
+    fields, contact = ctx.fields, ctx.contact
     cond = problem.condition_vector()
     from hsi_planning.implicit.problem import local_feature
 
@@ -533,22 +539,11 @@ def test_the_empty_hand_is_kept_from_reaching_past_its_target(planner: ImplicitP
     """Beyond the contact along the approach axis, a path may not come nearer the target than the contact
     (less ``target_slack``); in front of the contact it may, and a carrying path is not held to it."""
     cloud = scene_cloud()
-    problem = make_problem(
-        cloud.points, cloud.labels, [2], hand="right", action="grasp", segment="approach", approach_axis=AXIS
+    problem, ctx = _can_context(cloud, planner)
+    ctx = dataclasses.replace(
+        ctx, approach_axis=np.asarray(AXIS, dtype=np.float64), target=Clearance(problem.target_points)
     )
-    contact = contact_point(problem.target_points, AXIS, 0.06)
-    clearance = Clearance(cloud.points[cloud.labels != 2])
-    ctx = SegmentContext(
-        fields=problem_fields(problem),
-        clearance=clearance,
-        contact=contact,
-        contact_clear=float(clearance(contact)[0]),
-        carried=np.zeros((1, 3)),
-        lift=0.0,
-        config=planner.config,
-        approach_axis=np.asarray(AXIS, dtype=np.float64),
-        target=Clearance(problem.target_points),
-    )
+    contact = ctx.contact
     axis = np.asarray(AXIS, dtype=np.float64)
     straight = contact + np.linspace(0.15, 0.0, 16)[:, None] * axis  # straight in along the axis
     clear_in, _ = segment_module._violation(straight, ctx, carrying=False)
