@@ -10,8 +10,10 @@ gripper's speed limit) and makes the grasp *pending*; while pending, the weld is
   one finger already touches it, or the fingers have reached the closed stop (a thin or small target).
 
 On activation the weld's relative pose is set to the current gripper-to-target pose, so the target keeps
-where it is in the hand (no jump). A ``release`` event deactivates the weld and opens the fingers. A grasp
-still pending after ``timeout_s`` is recorded as failed (the fingers stay closed, nothing is held).
+where it is in the hand (no jump), and with ``stop_fingers`` the finger targets stop where the fingers are
+(a force-limited gripper does not squeeze on against the weld). A ``release`` event deactivates the weld
+and opens the fingers. A grasp still pending after ``timeout_s`` is recorded as failed (the fingers stay
+closed, nothing is held).
 """
 
 from __future__ import annotations
