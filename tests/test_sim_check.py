@@ -484,3 +484,33 @@ def test_video_of_an_execution(world: SimWorld, tmp_path: object) -> None:
     assert len(imageio.mimread(path)) == len(recorder.frames)
     with pytest.raises(ConfigError, match="offscreen"):
         VideoRecorder(world, VideoConfig(width=2000, height=2000))
+
+
+def test_after_a_release_the_fingers_open_to_the_trajectory_and_follow_it(world: SimWorld) -> None:
+    """Pre-shaped fingers (5 cm from the mid-plane, :mod:`hsi_retarget.finger_room`): after the release they
+    open to the trajectory's 5 cm, not to the full stroke, and then follow it (to 6 cm at the end)."""
+    traj = _pick_script(world, "can1", PLACE).build()
+    cols = [world.robot.q_index(j) for j in world.robot.gripper_joints["left"]]
+    q = np.array(traj.q)
+    q[:, cols] = 0.05
+    q[-1, cols] = 0.06
+    traj = JointTrajectory(traj.robot, traj.t, q, traj.joint_names, traj.events)
+    fingers = np.flatnonzero(np.isin(np.asarray(world.map.ctrl_q), world.finger_q["left"]))
+    act = np.asarray(world.map.ctrl_adr)[fingers]
+    log: list[tuple[float, float]] = []
+    report = execute(
+        world,
+        traj,
+        goal=TaskGoal("can1", PLACE),
+        on_frame=lambda w: log.append((w.time, float(w.data.ctrl[act].max()))),
+    )
+    grasp, release = report.grasps[0], report.grasps[1]
+    t, ctrl = np.array(log).T
+    t -= t[0]
+    assert np.allclose(ctrl[t < traj.events[0].time - 0.02], 0.05)  # approaching pre-shaped
+    assert ctrl[(t > grasp.time_s) & (t < release.time_s)].max() < 0.045  # closed on the can
+    after = t > release.time_s
+    assert ctrl[after].max() <= 0.06 + 1e-9  # never opened to the 7 cm stroke
+    assert ctrl[(t > release.time_s + 0.3) & (t < release.time_s + 0.45)] == pytest.approx(0.05, abs=1e-6)
+    assert ctrl[-1] == pytest.approx(0.06, abs=1e-6)
+    assert report.success

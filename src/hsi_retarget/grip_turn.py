@@ -34,10 +34,13 @@ from hsi_retarget.human_motion import HumanMotion
 __all__ = [
     "GripTurnConfig",
     "across_bar_angle",
+    "grip_phases",
     "handle_bar_axes",
     "narrow_side_angle",
     "object_prims",
+    "object_width",
     "turn_grips",
+    "turn_weight",
 ]
 
 F64 = NDArray[np.float64]
@@ -101,7 +104,7 @@ def object_prims(spec: Any) -> dict[str, list[Any]]:
     return {b.name: b.world_prims() for b in scene_bodies(spec) if b.kind == "object"}
 
 
-def _width(prims: Sequence[Any], u: F64) -> float:
+def object_width(prims: Sequence[Any], u: F64) -> float:
     """[m] extent of ``prims`` along the unit direction ``u`` (3,)."""
     lo, hi = np.inf, -np.inf
     for p in prims:
@@ -144,11 +147,11 @@ def narrow_side_angle(rotation: F64, prims: Sequence[Any], config: GripTurnConfi
     about the wrist's x axis to the object's narrowest side (within 1 mm)."""
     cfg = config if config is not None else GripTurnConfig()
     opening = cfg.opening or DEFAULT_OPENING
-    if not prims or _width(prims, rotation[:, 1]) <= opening - 2.0 * cfg.clearance:
+    if not prims or object_width(prims, rotation[:, 1]) <= opening - 2.0 * cfg.clearance:
         return 0.0
     n = round(90.0 / cfg.step_deg)
     angles = np.radians(cfg.step_deg) * np.arange(-n, n + 1)
-    widths = np.array([_width(prims, _turned(rotation, float(a))) for a in angles])
+    widths = np.array([object_width(prims, _turned(rotation, float(a))) for a in angles])
     near = widths <= widths.min() + 1e-3
     best = int(np.flatnonzero(near)[np.argmin(np.abs(angles[near]))])
     # the middle of the run of narrowest sides around it (circular: -90 and 90 deg are the same turn),
@@ -168,7 +171,7 @@ def _ease(u: F64) -> F64:
     return np.asarray(10 * u**3 - 15 * u**4 + 6 * u**5)
 
 
-def _weight(
+def turn_weight(
     t: F64, grasp: GraspWindow, release: GraspWindow | None, span: tuple[float, float], turn_s: float
 ) -> F64:
     """(T,) share of the turn: easing in over the grasp's approach (at least ``turn_s`` [s], not before
@@ -182,6 +185,23 @@ def _weight(
         b1 = min(max(release.after[1], b0 + turn_s), span[1])
         w = np.where(t > b0, 1.0 - _ease((t - b0) / max(b1 - b0, 1e-9)), w)
     return np.asarray(w)
+
+
+def grip_phases(
+    windows: Sequence[GraspWindow], side: str
+) -> list[tuple[GraspWindow, GraspWindow | None, tuple[float, float]]]:
+    """Per grasp of hand ``side`` (time order): the grasp window, its release (``None``: held to the end)
+    and the span [s] a change of the grip may use (from the hand's previous event to its next one after
+    the release; infinite where there is none)."""
+    own = sorted((w for w in windows if w.hand == side), key=lambda w: w.time)
+    out = []
+    for i, w in enumerate(own):
+        if w.kind != "grasp":
+            continue
+        release = next((v for v in own[i + 1 :] if v.target == w.target and v.kind == "release"), None)
+        after = [v.time for v in own if release is not None and v.time > release.time]
+        out.append((w, release, (own[i - 1].time if i > 0 else -np.inf, min(after, default=np.inf))))
+    return out
 
 
 def turn_grips(
@@ -199,12 +219,9 @@ def turn_grips(
     records: list[dict[str, Any]] = []
     t = motion.t
     for side in motion.wrist_rotation:
-        own = sorted((w for w in windows if w.hand == side), key=lambda w: w.time)
         rot = Rotation.from_matrix(rotations[side])
         turned = False
-        for i, w in enumerate(own):
-            if w.kind != "grasp":
-                continue
+        for w, release, span in grip_phases(windows, side):
             k = int(np.clip(np.searchsorted(t, w.time - 1e-9), 0, t.shape[0] - 1))
             planned = rot[k].as_matrix()
             if not w.free and cfg.bars and w.target in bars:
@@ -218,10 +235,7 @@ def turn_grips(
             )
             if abs(angle) < 1e-9:
                 continue
-            release = next((v for v in own[i + 1 :] if v.target == w.target and v.kind == "release"), None)
-            after = [v.time for v in own if release is not None and v.time > release.time]
-            span = (own[i - 1].time if i > 0 else -np.inf, min(after, default=np.inf))
-            turn = _weight(t, w, release, span, cfg.turn_s) * angle
+            turn = turn_weight(t, w, release, span, cfg.turn_s) * angle
             rot = rot * Rotation.from_rotvec(np.outer(turn, [1.0, 0.0, 0.0]))
             turned = True
         if turned:

@@ -95,6 +95,8 @@ class RobotGoals:
         shoulder: side -> (T, 3) [m] the robot's nominal shoulder positions the goals were mapped about.
         scale: [-] the wrist-offset scale used.
         contact: side -> (T,) [0..1] closeness to a contact (:attr:`HumanMotion.contact`; empty: none).
+        finger: side -> (T,) [m] opening of each finger joint of its gripper (NaN or no entry: as it is;
+            :mod:`hsi_retarget.finger_room`).
     """
 
     t: F64
@@ -107,6 +109,7 @@ class RobotGoals:
     shoulder: dict[str, F64]
     scale: float
     contact: dict[str, F64] = field(default_factory=dict)
+    finger: dict[str, F64] = field(default_factory=dict)
 
     def unreachable_intervals(self) -> list[dict[str, float | str]]:
         """Contiguous runs of active, unreachable samples: ``side``, ``t_start``/``t_end`` [s],

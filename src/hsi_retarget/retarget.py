@@ -26,7 +26,8 @@ from numpy.typing import NDArray
 from hsi_planning.errors import ConfigError, RetargetError
 from hsi_planning.trajectory import WristTrajectory
 from hsi_retarget.carry_correction import correct_carry
-from hsi_retarget.grasp_depth import GraspDepthConfig, grasp_windows, shape_grasps
+from hsi_retarget.finger_room import FingerRoomConfig, make_finger_room
+from hsi_retarget.grasp_depth import GraspDepthConfig, GraspWindow, grasp_windows, shape_grasps
 from hsi_retarget.grip_turn import (
     DEFAULT_OPENING,
     GripTurnConfig,
@@ -85,6 +86,10 @@ class RetargetConfig:
     #: With ``grasp``: the gripper turned about its approach axis to grip across handle bars and the
     #: narrow side of objects (:mod:`hsi_retarget.grip_turn`; needs the scene spec).
     grip: GripTurnConfig = field(default_factory=GripTurnConfig)
+    #: With ``grasp`` and a scene spec: the fingers open only as far as each free object needs, and a
+    #: top-down grasp turns about its approach axis where the fingers have room
+    #: (:mod:`hsi_retarget.finger_room`); ``None``: fully open, as planned.
+    room: FingerRoomConfig | None = field(default_factory=FingerRoomConfig)
     #: Carries re-aimed from the TCP pose reached at their grasp (:mod:`hsi_retarget.carry_correction`) [-].
     correct_carry: bool = True
 
@@ -116,26 +121,28 @@ def _free_objects(scene: Any, motion: HumanMotion) -> list[str]:
 
 def _human_motion(
     source: Source, cfg: RetargetConfig, scene: Any = None
-) -> tuple[HumanMotion, list[dict[str, Any]]]:
+) -> tuple[HumanMotion, list[dict[str, Any]], list[GraspWindow]]:
     """The human goals of ``source`` (a schedule's with gripper goals around its grasps when
-    ``cfg.grasp`` is set, turned to grip across, :mod:`hsi_retarget.grip_turn`) and the grasps turned."""
+    ``cfg.grasp`` is set, turned to grip across, :mod:`hsi_retarget.grip_turn`), the grasps turned and the
+    grasp windows (empty unless shaped)."""
     if isinstance(source, HumanMotion):
-        return source, []
+        return source, [], []
     if hasattr(source, "keyframes") and hasattr(source, "segments"):  # a Schedule
         schedule = cast("Schedule", source)
         motion = human_motion_from_schedule(schedule, cfg.sample_rate)
         turns: list[dict[str, Any]] = []
+        windows: list[GraspWindow] = []
         if cfg.grasp is not None:
             windows = grasp_windows(schedule, _free_objects(scene, motion), cfg.grasp)
             if hasattr(scene, "furniture"):  # a scene spec: its handle bars and object shapes
                 bars, prims = handle_bar_axes(scene), object_prims(scene)
                 motion, turns = turn_grips(motion, windows, bars, prims, cfg.grip)
             motion = shape_grasps(motion, windows, cfg.grasp)
-        return motion, turns
+        return motion, turns, windows
     segments = [source] if isinstance(source, WristTrajectory) else list(source)
     if not all(isinstance(s, WristTrajectory) for s in segments):
         raise RetargetError("retarget() takes a HumanMotion, a Schedule or WristTrajectory segments")
-    return human_motion_from_wrists(segments, cfg.hip, rate=cfg.sample_rate), []
+    return human_motion_from_wrists(segments, cfg.hip, rate=cfg.sample_rate), [], []
 
 
 def _scene(scene: Any, motion: HumanMotion, source: Any) -> SceneDistance | None:
@@ -197,11 +204,16 @@ def track(
     fallbacks, min_clear = 0, np.inf
     tol_p, tol_o = solver.config.position_tolerance, solver.config.orientation_tolerance
     layer: tuple[SceneDistance | None, str] = (None, "")
+    grippers = robot.gripper_joints
+    fingers = {s: [robot.q_index(j) for j in grippers[s]] for s in goals.finger if s in grippers}
     for i in range(start if before is not None else 0, n):
         now = (None, "") if part is None else part.at(float(goals.t[i]))
         if now[0] is not layer[0] or now[1] != layer[1]:
             layer = now
             solver.set_part_scene(*layer)
+        for s, idx in fingers.items():  # the fingers are no IK variables: set to their opening
+            if np.isfinite(goals.finger[s][i]):
+                q[idx] = goals.finger[s][i]
         lift = float(goals.lift[i])
         root = goals.root[i]
         if feet is not None and np.isfinite(feet.com[i]).all():  # stepping: pelvis over the stance foot
@@ -295,13 +307,18 @@ def retarget(
         fingers = next(iter(model.gripper_joints.values()), ())
         opening = float(sum(model.q_upper[model.q_index(j)] for j in fingers))
         cfg = replace(cfg, grip=replace(cfg.grip, opening=opening or DEFAULT_OPENING))
-    motion, handle_turns = _human_motion(source, cfg, scene)
+    motion, handle_turns, windows = _human_motion(source, cfg, scene)
     mapping = cfg.mapping or MappingConfig(anchor="shoulder" if motion.shoulder_position else "world")
     t0 = time.perf_counter()
     goals = map_to_robot(motion, model, mapping)
     t_map = time.perf_counter() - t0
     solver = IKSolver(model, cfg.ik, _scene(scene, motion, source), cfg.support)
     part = _part_phase(source, scene, motion)
+    finger_room: list[dict[str, Any]] = []
+    if cfg.room is not None and windows and hasattr(scene, "objects"):
+        goals, finger_room = make_finger_room(
+            goals, windows, object_prims(scene), solver, part=part, config=cfg.room
+        )
     t1 = time.perf_counter()
     qs, _, _, diag = track(goals, model, solver, cfg, part=part)
     if cfg.correct_carry and motion.events:  # re-aim the carries from the reached grasp poses
@@ -353,6 +370,7 @@ def retarget(
         "goal_time": goals.t,
         "time_scaling": timing.summary(goals.t),
         "handle_turns": handle_turns,
+        "finger_room": finger_room,
         **diag,
     }
     if np.isfinite(goals.lift).any():

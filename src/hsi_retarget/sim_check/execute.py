@@ -134,7 +134,8 @@ class _Run:
             self.grasp.command(self.events.pop(0), t)
         q_ref = self.active.sample(tau)
         qd_ref = (self.active.sample(tau + self.dt / 2) - self.active.sample(tau - self.dt / 2)) / self.dt
-        self.servo.apply(q_ref, qd_ref, self.grasp.finger_targets(self.dt))
+        reference = {h: float(np.mean(q_ref[w.finger_q[h]])) for h in HANDS}
+        self.servo.apply(q_ref, qd_ref, self.grasp.finger_targets(self.dt, reference))
         self.limits.check(t, q_ref, "command")
         mujoco.mj_kinematics(w.model, w.data)
         q_now = w.robot_q()

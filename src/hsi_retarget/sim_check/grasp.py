@@ -12,7 +12,8 @@ gripper's speed limit) and makes the grasp *pending*; while pending, the weld is
 On activation the weld's relative pose is set to the current gripper-to-target pose, so the target keeps
 where it is in the hand (no jump), and with ``stop_fingers`` the finger targets stop where the fingers are
 (a force-limited gripper does not squeeze on against the weld). A ``release`` event deactivates the weld
-and opens the fingers. A grasp still pending after ``timeout_s`` is recorded as failed (the fingers stay
+and opens the fingers to the trajectory's opening (:mod:`hsi_retarget.finger_room`), which they follow
+from then on. A grasp still pending after ``timeout_s`` is recorded as failed (the fingers stay
 closed, nothing is held).
 """
 
@@ -81,14 +82,19 @@ class GraspController:
                 self.held[hand] = target
                 self.finger_command[hand] = self.closed_value[hand]
 
-    def finger_targets(self, dt: float) -> dict[str, float | None]:
+    def finger_targets(self, dt: float, reference: dict[str, float] | None = None) -> dict[str, float | None]:
         """Finger position targets [m] for the next ``dt`` [s]: moving towards the commanded opening at the
-        gripper's speed limit; None where the trajectory's finger values apply."""
+        gripper's speed limit; None where the trajectory's finger values apply. After a release the fingers
+        open towards the trajectory's value ``reference[hand]`` [m] (default: fully open) at that speed,
+        and follow the trajectory once they are there."""
         out: dict[str, float | None] = {}
-        for hand, goal in self.finger_command.items():
+        for hand, command in self.finger_command.items():
+            goal = command
             if goal is None:
-                out[hand] = None
-                continue
+                if hand not in self._finger_now:  # following the trajectory
+                    out[hand] = None
+                    continue
+                goal = (reference or {}).get(hand, self.open_value[hand])
             now = self._finger_now.get(hand)
             if now is None:
                 now = float(np.mean(self.world.robot_q()[self.world.finger_q[hand]]))
@@ -96,6 +102,8 @@ class GraspController:
             now = float(np.clip(goal, now - step, now + step))
             self._finger_now[hand] = now
             out[hand] = now
+            if command is None and now == goal:  # opened to the trajectory's value: follow it again
+                del self._finger_now[hand]
         return out
 
     def command(self, event: ContactEvent, time: float) -> None:
@@ -118,7 +126,8 @@ class GraspController:
             self.finger_command[hand] = self.closed_value[hand]
             return
         self.pending.pop(hand, None)
-        self.finger_command[hand] = self.open_value[hand]
+        self.finger_command[hand] = None  # open towards the trajectory's fingers (finger_targets)
+        self._finger_now[hand] = float(np.mean(self.world.robot_q()[self.world.finger_q[hand]]))
         target = self.held.pop(hand, "")
         if target:
             self.world.data.eq_active[self.world.welds[(hand, target)]] = 0
