@@ -140,7 +140,8 @@ def make_finger_room(
 ) -> tuple[RobotGoals, list[dict[str, Any]]]:
     """A copy of ``goals`` with room for the fingers at every free-object grasp (see the module docstring)
     and one record per grasp (``hand``, ``target``, ``time_s`` [s], ``turn_deg`` [deg], ``aperture_m``
-    [m] per finger, ``room_m`` [m] before and after the turn; ``nan`` where not searched).
+    [m] per finger, ``room_m`` [m] before and after the turn; ``None`` where not searched or the object
+    does not fit).
 
     ``objects``: free object name -> world primitives (:func:`~hsi_retarget.grip_turn.object_prims`);
     ``solver``: the IK solver (its robot, spheres, margins and scene); ``part``: an opened door or drawer.
@@ -192,7 +193,7 @@ def make_finger_room(
                     "time_s": grasp.time,
                     "turn_deg": float(np.degrees(searched[best])),
                     "aperture_m": aperture,
-                    "room_m": [float(rooms[zero]), float(rooms[best])],
+                    "room_m": [_finite(rooms[zero]), _finite(rooms[best])],
                 }
             )
             if aperture < hand.stroke:
@@ -210,6 +211,10 @@ def _opening(prims: Sequence[Any], pose: F64, angle: float, stroke: float, cfg: 
     if half + 0.5 * cfg.clearance > stroke:
         return math.nan
     return min(half + cfg.clearance, stroke) if cfg.aperture else stroke
+
+
+def _finite(value: float) -> float | None:
+    return float(value) if math.isfinite(value) else None
 
 
 def _scenes(solver: IKSolver, part: PartPhase | None, side: str, time: float) -> list[Any]:
