@@ -36,7 +36,10 @@ from hsi_planning.config import from_mapping
 from hsi_planning.errors import ConfigError, PlanningError
 from hsi_planning.perception import LabelledCloud
 from hsi_planning.scene_paths import load_scene
-from hsi_planning.scheduler import SceneWorld
+from hsi_planning.scene import SceneSpec
+from hsi_planning.scheduler import ReachModelPlanner, SceneWorld, find_blockers
+from hsi_planning.scheduler.auxiliary import AuxiliaryConfig
+from hsi_planning.scheduler.world import WorldState
 from hsi_retarget.grasp_depth import GraspDepthConfig, grasp_windows, shape_grasps
 from hsi_retarget.gripper_dwell import DwellConfig, add_gripper_dwell
 from hsi_retarget.joint_trajectory import ContactEvent, JointTrajectory
@@ -102,6 +105,23 @@ def test_clicks_resolve_against_the_cloud(kitchen_cloud: LabelledCloud) -> None:
     occupied = dataclasses.replace(COUNTER, place_click=(0.95, 0.04, 0.9))  # beside the teapot
     with pytest.raises(PlanningError, match="not free"):
         resolve_task(occupied, world, config)
+
+
+def test_a_robot_hand_needs_more_room_past_a_neighbour_than_a_human_hand() -> None:
+    """The narrow shelf's bottle moved 8 cm aside of the can's way out: a human hand (the scheduler's
+    default 3.5 cm sphere) passes it, the robot's gripper (the pipeline's hand sphere) does not, so the
+    demo's scheduler moves the bottle first."""
+    doc = load_scene("narrow_shelf").to_dict()
+    for obj in doc["objects"]:
+        if obj["name"] == "bottle1":
+            obj["xy"] = [obj["xy"][0], obj["xy"][1] + 0.08]
+    world = SceneWorld(SceneSpec.from_dict(doc))
+    planner = ReachModelPlanner()
+    for robot in ("dual_ur5e", "humanoid"):
+        aux = PipelineConfig(robot=robot).scheduler_config().auxiliary
+        assert aux.hand_radius > AuxiliaryConfig().hand_radius
+        assert find_blockers(world, planner, "can1", WorldState(), hand="right", config=aux) == ["bottle1"]
+    assert find_blockers(world, planner, "can1", WorldState(), hand="right", config=AuxiliaryConfig()) == []
 
 
 # ---------------------------------------------------------------------------- grasp depth and dwell

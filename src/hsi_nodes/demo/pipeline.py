@@ -49,6 +49,7 @@ from hsi_retarget.sim_check import ExecutionConfig, ExecutionReport, SimWorld
 __all__ = [
     "DEMO_PLANNERS",
     "ROBOT_BODY_RADIUS",
+    "ROBOT_HAND_RADIUS",
     "PipelineConfig",
     "TaskOutcome",
     "make_demo_planner",
@@ -62,6 +63,9 @@ _log = logging.getLogger(__name__)
 #: Footprint radius of each robot's base [m]: the scheduler's body radius, so the planned root path keeps
 #: the base clear of the furniture (dual arm: half diagonal of the 0.6 x 0.5 m base box, rounded up).
 ROBOT_BODY_RADIUS: dict[str, float] = {"dual_ur5e": 0.4, "humanoid": 0.25}
+#: Hand sphere of the scheduler's blocker check around the wrist [m]: a robot's gripper (palms 11–15 cm
+#: wide) needs more room than a human hand (the planner's default 3.5 cm) to reach past a neighbour.
+ROBOT_HAND_RADIUS: dict[str, float] = {"dual_ur5e": 0.05, "humanoid": 0.05}
 #: Planner names of the demo: the scheduler's, plus the minimum-jerk baseline.
 DEMO_PLANNERS: tuple[str, ...] = tuple(dict.fromkeys((*SCHEDULER_PLANNERS, "minjerk")))
 
@@ -99,10 +103,14 @@ class PipelineConfig:
         return self.body_radius or ROBOT_BODY_RADIUS.get(self.robot, 0.25)
 
     def scheduler_config(self) -> SchedulerConfig:
-        """The scheduler's config: defaults with the robot's body radius."""
+        """The scheduler's config: defaults with the robot's body radius and hand sphere."""
         from hsi_planning.config import from_mapping
 
-        return from_mapping(SchedulerConfig, {"body": {"body_radius": self.root_radius}}, where="demo")
+        overrides = {
+            "body": {"body_radius": self.root_radius},
+            "auxiliary": {"hand_radius": ROBOT_HAND_RADIUS.get(self.robot, 0.05)},
+        }
+        return from_mapping(SchedulerConfig, overrides, where="demo")
 
 
 def make_demo_planner(name: str, checkpoint: str = "models/planner.pt") -> Planner:
