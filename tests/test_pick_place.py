@@ -35,8 +35,8 @@ from hsi_nodes.transport.base import QoS, Transport
 from hsi_planning.config import from_mapping
 from hsi_planning.errors import ConfigError, PlanningError
 from hsi_planning.perception import LabelledCloud
-from hsi_planning.scene_paths import load_scene
 from hsi_planning.scene import SceneSpec
+from hsi_planning.scene_paths import load_scene
 from hsi_planning.scheduler import ReachModelPlanner, SceneWorld, find_blockers
 from hsi_planning.scheduler.auxiliary import AuxiliaryConfig
 from hsi_planning.scheduler.world import WorldState
