@@ -7,11 +7,14 @@ import numpy as np
 import pinocchio as pin
 import pytest
 import trimesh
+from scipy.spatial.transform import Rotation
 
 from hsi_planning.errors import ConfigError, RetargetError
+from hsi_planning.scheduler.body import wrist_quaternion
 from hsi_retarget.collision import robot_spheres
 from hsi_retarget.humanoid_ik import SupportConfig, com_inside, support_polygon
 from hsi_retarget.ik import IKConfig, IKSolver, IKTargets
+from hsi_retarget.mapping import MappingConfig
 from hsi_retarget.robots import RobotModel
 from hsi_retarget.scene_distance import SceneDistance
 
@@ -188,6 +191,24 @@ def test_humanoid_feet_fixed_and_com_inside_while_wrists_track(robots: dict[str,
         pos, _ori = solver.errors(q, targets)
         errors.append(max(pos.values()))
     assert np.median(errors) < 0.01, np.median(errors)
+
+
+def test_humanoid_side_grasp_with_the_forearm_about_neutral(robots: dict[str, RobotModel]) -> None:
+    """A person's side grasp of an upright object in front at chest height (wrist x forward, thumb up,
+    mapped with the default ``wrist_to_tcp``) is reached with the humanoid's forearm about neutral, as a
+    person does it: its fingers close along a human palm's normal."""
+    robot = robots["humanoid"]
+    wrist = Rotation.from_quat(wrist_quaternion([1.0, 0.0, 0.0])).as_matrix()
+    to_tcp = Rotation.from_rotvec(MappingConfig().wrist_to_tcp_rotvec).as_matrix()
+    tcp = {}
+    for side, y in (("left", 0.2), ("right", -0.2)):
+        goal = np.eye(4)
+        goal[:3, :3], goal[:3, 3] = wrist @ to_tcp, (0.45, y, 1.1)
+        tcp[side] = goal
+    result = IKSolver(robot).solve(robot.q_home, IKTargets(tcp=tcp, root=_root(robot), feet=_feet(robot)))
+    for side in SIDES:
+        assert result.position_error[side] < 5e-3 and np.degrees(result.orientation_error[side]) < 3.0
+        assert abs(result.q[robot.q_index(f"{side}_wrist_yaw")]) < 0.2  # of +-1.4 rad
 
 
 def test_support_polygon_is_the_hull_of_both_soles(robots: dict[str, RobotModel]) -> None:

@@ -5,10 +5,12 @@ anthropometric table (Biomechanics and Motor Control of Human Movement): thigh 0
 ankle height 0.039 H, shoulder height 0.818 H, upper arm 0.186 H, forearm 0.146 H; masses head 0.081,
 trunk 0.497 (thorax+abdomen 0.355, pelvis 0.142), upper arm 0.028, forearm 0.016, hand 0.006,
 thigh 0.100, shank 0.0465, foot 0.0145. Every link frame is world-aligned at q = 0 (x forward, y left,
-z up). The hands are parallel two-finger grippers (opening 9 cm) whose ``{side}_tcp`` has z pointing
-out of the hand and y forward (thumb–finger axis) at home. Joint limits are human ranges of motion.
-In MuJoCo the pelvis can be held by the ``pelvis_anchor`` mocap body (weld ``pelvis_anchor_weld``,
-inactive by default); the home pose stands on its own with the position actuators.
+z up), except the wrists, turned a quarter about the forearm so that the forearm is neutral at
+``wrist_yaw`` = 0. The hands are parallel two-finger grippers (opening 9 cm) whose ``{side}_tcp`` has z
+pointing out of the hand and y to the left (the fingers close across the palm, as a human hand's pinch;
+the mapping's human wrist frame lands on it with the forearm neutral) at home. Joint limits are human
+ranges of motion. In MuJoCo the pelvis can be held by the ``pelvis_anchor`` mocap body (weld
+``pelvis_anchor_weld``, inactive by default); the home pose stands on its own with the position actuators.
 """
 
 from __future__ import annotations
@@ -90,6 +92,12 @@ ARM_JOINTS = (
 _HOME = {"hip_pitch": -0.1, "knee": 0.2, "ankle_pitch": -0.1, "shoulder_roll": 0.12, "elbow": -0.3}
 
 
+#: The wrist frame turned 90 deg about the forearm: at wrist_yaw = 0 the forearm is neutral (a hanging hand's
+#: palm faces the thigh, the fingers close along y like a human pinch across the palm), so wrist_yaw's
+#: +-1.4 rad is pronation/supination about neutral, wrist_pitch flexion and wrist_roll deviation.
+_NEUTRAL_FOREARM = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+
+
 def _joint(base: str, side: str) -> Joint:
     axis, lo, hi, vel, effort, kp, kv, armature = _JOINTS[base]
     if side == "right" and axis != Y:  # mirror about the sagittal plane: roll and yaw change sign
@@ -168,14 +176,15 @@ def _arm(side: str) -> tuple[list[Link], list[Frame]]:
         Link(
             p + "wrist",
             p + "forearm",
-            transform((0.0, 0.0, -FOREARM)),
+            transform((0.0, 0.0, -FOREARM), _NEUTRAL_FOREARM),
             tuple(_joint(j, side) for j in ARM_JOINTS[4:]),
             Inertial.solid(0.02, np.zeros(3), np.eye(3) * 1e-5),
             (),
             group,
         ),
     ]
-    # gripper frame: z down the hand, y forward (thumb-finger axis), x = y cross z
+    # gripper frame in the (turned) wrist frame: z down the hand, y = the wrist's x (left at home),
+    # x = y cross z
     mount = transform((0.0, 0.0, 0.0), np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]]))
     hand_links, hand_frames = parallel_gripper(side, p + "wrist", mount, HAND, group)
     frames = [Frame(p + "shoulder", "torso", shoulder), *hand_frames]
