@@ -63,9 +63,10 @@ _log = logging.getLogger(__name__)
 #: Footprint radius of each robot's base [m]: the scheduler's body radius, so the planned root path keeps
 #: the base clear of the furniture (dual arm: half diagonal of the 0.6 x 0.5 m base box, rounded up).
 ROBOT_BODY_RADIUS: dict[str, float] = {"dual_ur5e": 0.4, "humanoid": 0.25}
-#: Hand sphere of the scheduler's blocker check around the wrist [m]: a robot's gripper (palms 11–15 cm
-#: wide) needs more room than a human hand (the planner's default 3.5 cm) to reach past a neighbour.
-ROBOT_HAND_RADIUS: dict[str, float] = {"dual_ur5e": 0.05, "humanoid": 0.05}
+#: Hand sphere of the scheduler's blocker check around the wrist [m], for both robots: a robot's gripper
+#: (palms 11–15 cm wide) needs more room than a human hand (the planner's default 3.5 cm) to reach past a
+#: neighbour.
+ROBOT_HAND_RADIUS = 0.05
 #: Planner names of the demo: the scheduler's, plus the minimum-jerk baseline.
 DEMO_PLANNERS: tuple[str, ...] = tuple(dict.fromkeys((*SCHEDULER_PLANNERS, "minjerk")))
 
@@ -108,7 +109,7 @@ class PipelineConfig:
 
         overrides = {
             "body": {"body_radius": self.root_radius},
-            "auxiliary": {"hand_radius": ROBOT_HAND_RADIUS.get(self.robot, 0.05)},
+            "auxiliary": {"hand_radius": ROBOT_HAND_RADIUS},
         }
         return from_mapping(SchedulerConfig, overrides, where="demo")
 
