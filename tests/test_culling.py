@@ -44,6 +44,17 @@ def test_lower_bound_never_exceeds_the_distance(kitchen: SceneDistance) -> None:
     assert np.all(dist[~near] >= np.minimum(exact[~near], 0.1) - 1e-6)
     assert np.all(dist <= exact + 1e-5)
     assert np.allclose(np.linalg.norm(grad[dist < 0.1], axis=1), 1.0)
+    # points measured without the floor (a robot's base) get their own bound and exact distance
+    meshes = scene_meshes(load_scene("kitchen"))
+    lifted = SceneDistance({n: m for n, m in meshes.items() if n != "floor"})
+    raised = np.arange(points.shape[0]) % 2 == 0
+    dist, _ = kitchen.query_within(points, reach, grounded=~raised)
+    no_floor, _ = lifted.query(points)
+    near = raised & (no_floor < 0.1)
+    assert near.sum() > 20
+    assert np.allclose(dist[near], no_floor[near], atol=1e-6)
+    assert np.all(dist[raised] <= no_floor[raised] + 1e-5)
+    assert np.all(dist[raised & ~near] >= 0.1 - 1e-6)
 
 
 @pytest.mark.parametrize("name", ["dual_ur5e", "humanoid"])
@@ -52,8 +63,9 @@ def test_culled_rows_and_clearance_equal_the_full_check(name: str, kitchen: Scen
     config = IKConfig()
     solver = IKSolver(robot, config, kitchen)
     spheres, pairs = solver.spheres, solver.spheres.pairs()
-    bounds = LinkBounds(spheres)
+    bounds = LinkBounds(spheres, pairs)  # culls these pairs when given bounds.pairs, the very array
     assert bounds.frame_ids.shape[0] < spheres.radii.shape[0]
+    assert bounds.pairs is not None and bounds.pairs is not pairs and np.array_equal(bounds.pairs, pairs)
     data = robot.model.createData()
     rng = np.random.default_rng(11)
     margins = (config.scene_margin, config.tip_margin, config.self_margin)
@@ -72,21 +84,30 @@ def test_culled_rows_and_clearance_equal_the_full_check(name: str, kitchen: Scen
         pin.updateFramePlacements(robot.model, data)
         kwargs = dict(margins=margins, activation=config.activation_distance, gain=0.5, max_rows=1000)
         full = collision_rows(robot.model, data, spheres, pairs, kitchen, **kwargs)  # type: ignore[arg-type]
-        culled = collision_rows(robot.model, data, spheres, pairs, kitchen, bounds=bounds, **kwargs)  # type: ignore[arg-type]
+        culled = collision_rows(robot.model, data, spheres, bounds.pairs, kitchen, bounds=bounds, **kwargs)  # type: ignore[arg-type]
+        centres = spheres.world(data)  # the pairs' pre-filter keeps exactly the pairs within reach
+        a, b = pairs[:, 0], pairs[:, 1]
+        gaps = np.linalg.norm(centres[a] - centres[b], axis=1) - spheres.radii[a] - spheres.radii[b]
+        assert np.array_equal(bounds.near_pairs(centres, 0.1), np.flatnonzero(gaps < 0.1))
         assert full[0].shape == culled[0].shape
         none = collision_rows(robot.model, data, spheres, pairs, kitchen, **{**kwargs, "max_rows": 0})  # type: ignore[arg-type]
         assert none[0].shape == (0, robot.model.nv) and none[2] == full[2]  # no rows, the same gap
-        order_f, order_c = np.lexsort(full[0].T), np.lexsort(culled[0].T)
+        # the same rows in either order (rounded for the sort: batches of other sizes round differently)
+        order_f, order_c = np.lexsort(np.round(full[0], 8).T), np.lexsort(np.round(culled[0], 8).T)
         assert np.allclose(full[0][order_f], culled[0][order_c], atol=1e-9)
         assert np.allclose(full[1][order_f], culled[1][order_c], atol=1e-9)
         exact = min_gap(spheres, spheres.world(data), pairs, kitchen, margins)
         fast = solver.clearance(q)
+        cut = solver.clearance(q, within=0.0)  # only cuts into the margins measured
+        assert cut == pytest.approx(exact, abs=1e-9) if exact < 0.0 else math.isinf(cut)
         if exact < config.activation_distance:
             assert fast == pytest.approx(exact, abs=1e-9)
             compared += 1
         else:
             assert math.isinf(fast)
     assert compared >= 10
+    with pytest.raises(RetargetError, match="repeated"):
+        LinkBounds(spheres, np.vstack([pairs, pairs[:1]]))
 
 
 def test_body_box_corners_are_covered_and_the_floor_is_no_body_obstacle() -> None:

@@ -196,6 +196,32 @@ def test_schedule_retargets_with_base_following_the_hip(dual: RobotModel) -> Non
     assert traj.q[-1][dual.q_index("base_x_joint")] == pytest.approx(0.3, abs=0.05)
 
 
+def test_a_carry_from_a_grasp_the_ik_ended_short_of_is_reaimed_in_one_pass(dual: RobotModel) -> None:
+    def key(time_s: float, joint: str, pos: list[float], **kw: Any) -> Keyframe:
+        return Keyframe(time_s, joint, np.array(pos), np.array([0.0, 0.0, 0.0, 1.0]), "reach", **kw)  # type: ignore[arg-type]
+
+    frames = []
+    for time_s, right, event in (
+        (0.0, [0.45, -0.25, 1.0], ""),
+        (1.5, [0.8, -0.2, 2.6], "grasp"),  # ~0.2 m above the arm's reach
+        (3.0, [0.65, -0.25, 1.1], ""),
+        (4.0, [0.65, -0.25, 1.1], "release"),
+    ):
+        frames += [key(time_s, "hip", [0.0, 0.0, 0.95]), key(time_s, "root", [0.0, 0.0, 0.0])]
+        frames += [key(time_s, "left_wrist", [0.45, 0.25, 1.0])]
+        name = "can1" if event else ""
+        frames += [key(time_s, "right_wrist", right, contact_event=event, hand="right", object_name=name)]
+    traj = retarget(Schedule("t1", tuple(frames)), dual)
+    (record,) = traj.meta["carry_corrections"]
+    assert (record["hand"], record["object"]) == ("right", "can1") and record["position_m"] > 0.1
+    t, goal = np.array(traj.meta["goal_time"]), np.array(traj.meta["goal_position"]["right"])
+    k = int(np.argmin(np.abs(t - 3.0)))
+    # the carry's end goal is no longer the planned one (world anchor: mapped as planned) ...
+    assert np.linalg.norm(goal[k] - goal[-1]) < 1e-9 and np.linalg.norm(goal[k] - [0.65, -0.25, 1.1]) > 0.05
+    reached = dual.frame_pose(traj.q[-1], "right_tcp")[:3, 3]  # ... and the IK followed the re-aimed carry
+    assert np.linalg.norm(reached - goal[-1]) < 0.005
+
+
 def test_wrist_segments_become_one_trajectory_with_events(dual: RobotModel) -> None:
     t = np.linspace(0.0, 1.0, 31)
     path = np.column_stack([0.4 + 0.3 * t, -0.25 + 0 * t, 1.0 - 0.1 * t])
@@ -408,7 +434,7 @@ def test_grippers_close_across_handle_bars_and_narrow_sides() -> None:
 
 
 def test_carry_is_reaimed_from_the_reached_grasp_pose(dual: RobotModel) -> None:
-    from hsi_retarget.carry_correction import correct_carry
+    from hsi_retarget.carry_correction import carry_frames, correct_carry
     from hsi_retarget.mapping import RobotGoals
 
     n = 121
@@ -436,6 +462,8 @@ def test_carry_is_reaimed_from_the_reached_grasp_pose(dual: RobotModel) -> None:
     events = (ContactEvent(1.0, "left", "grasp", "can1"), ContactEvent(3.0, "left", "release", "can1"))
     fixed, records, first = correct_carry(goals, qs, dual, events, ease_s=0.5)
     i_grasp = int(np.searchsorted(t, 1.0 - 1e-9))
+    assert carry_frames(t, events) == {i_grasp: events}  # where an IK pass re-aims it, with its release
+    assert carry_frames(t, events[:1]) == {i_grasp: events[:1]} and carry_frames(t, events[1:]) == {}
     assert first == i_grasp and len(records) == 1
     assert records[0]["position_m"] == pytest.approx(np.linalg.norm([0.02, -0.01, 0.015]), abs=1e-9)
     assert records[0]["angle_deg"] == pytest.approx(10.0, abs=1e-6)

@@ -25,7 +25,7 @@ from hsi_retarget.joint_trajectory import ContactEvent
 from hsi_retarget.mapping import RobotGoals
 from hsi_retarget.robots import RobotModel
 
-__all__ = ["correct_carry"]
+__all__ = ["carry_frames", "correct_carry"]
 
 F64 = NDArray[np.float64]
 
@@ -45,6 +45,19 @@ def _carries(events: Sequence[ContactEvent]) -> list[tuple[str, str, float, floa
         later = (v for v in events[k + 1 :] if v.hand == e.hand and v.kind == "release")
         release = next((v for v in later if v.object_name == e.object_name), None)
         out.append((e.hand, e.object_name, e.time, release.time if release is not None else None))
+    return out
+
+
+def carry_frames(t: F64, events: Sequence[ContactEvent]) -> dict[int, tuple[ContactEvent, ...]]:
+    """Sample index (into ``t`` (T,) [s]) of every free-object grasp -> its events (grasp and release, if
+    any): once the IK has reached that sample, :func:`correct_carry` with those events re-aims its carry
+    (an IK can do so as it goes, in one pass)."""
+    out: dict[int, tuple[ContactEvent, ...]] = {}
+    for hand, name, t_grasp, t_release in _carries(events):
+        i = int(np.clip(np.searchsorted(t, t_grasp - 1e-9), 0, t.shape[0] - 1))
+        grasp = ContactEvent(t_grasp, hand, "grasp", name)
+        own = (grasp,) if t_release is None else (grasp, ContactEvent(t_release, hand, "release", name))
+        out[i] = out.get(i, ()) + own
     return out
 
 

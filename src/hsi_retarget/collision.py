@@ -259,7 +259,8 @@ def collision_rows(
     near the scene and every pair of ``pairs`` (P, 2) closer than ``activation`` [m] beyond its margin
     (``margins`` = scene, finger tip, self [m]) is a candidate; the ``max_rows`` closest get a row
     ``n^T (J_a - J_b) dq >= -gain (d - margin)`` (a velocity damper: one step closes at most ``gain`` of the
-    gap). The pairs that may be near are picked from all sphere-centre distances at once, and ``bounds``
+    gap). The pairs that may be near are picked from sphere-centre distances computed at once (only those
+    of the pairs when ``pairs`` is ``bounds.pairs``, the very array; else all of them), and ``bounds``
     (built from the same spheres) skips the links that cannot be near the scene (same result, cheaper).
     ``extra`` = (scene, spheres (S,) that heed it): one more scene, e.g. an opened door that one hand
     holds. Returns A (k, nv), lower (k,) and the smallest gap [m] (``inf`` without candidates).
@@ -282,8 +283,10 @@ def collision_rows(
         return np.zeros((0, model.nv)), np.zeros(0), float(gaps.min())
     order = np.argsort(gaps)[:max_rows]
     ia, ib, dirs = ia[order], ib[order], dirs[order]
-    rows = _point_rows(model, data, spheres, centers, idx=ia, dirs=dirs)
-    rows -= _point_rows(model, data, spheres, centers, idx=ib, dirs=dirs)
+    both = _point_rows(
+        model, data, spheres, centers, idx=np.concatenate([ia, ib]), dirs=np.vstack([dirs, -dirs])
+    )
+    rows = both[: ia.shape[0]] + both[ia.shape[0] :]
     return rows, -gain * gaps[order], float(gaps[order[0]])
 
 
@@ -351,7 +354,10 @@ def _candidates(
         directions.append(normal[near])
     if pairs.shape[0]:
         a, b = pairs[:, 0], pairs[:, 1]
-        if np.isfinite(activation):  # every centre distance at once (C), then the pairs that may be near
+        if np.isfinite(activation) and bounds is not None and links is not None and bounds.pairs is pairs:
+            maybe = bounds.near_pairs(centers, activation + self_margin + _FILTER_TOLERANCE)
+            a, b = a[maybe], b[maybe]
+        elif np.isfinite(activation):  # every centre distance at once (C), then the pairs that may be near
             gap = cdist(centers, centers)[a, b] - spheres.radii[a] - spheres.radii[b] - self_margin
             maybe = gap < activation + _FILTER_TOLERANCE
             a, b = a[maybe], b[maybe]
@@ -386,6 +392,13 @@ def _point_rows(
     jac = np.stack([np.asarray(pin.getFrameJacobian(model, data, int(f), frame)) for f in unique])[inverse]
     origin = np.stack([np.asarray(data.oMf[int(f)].translation) for f in unique])[inverse]
     d = dirs[used]
-    lever = np.cross(d, centers[idx[used]] - origin)  # d . (w x r) = -(d x r) . w
+    r = centers[idx[used]] - origin
+    lever = np.column_stack(  # d x r (np.cross's formula, without its overhead): d . (w x r) = -(d x r) . w
+        (
+            d[:, 1] * r[:, 2] - d[:, 2] * r[:, 1],
+            d[:, 2] * r[:, 0] - d[:, 0] * r[:, 2],
+            d[:, 0] * r[:, 1] - d[:, 1] * r[:, 0],
+        )
+    )
     rows[used] = np.einsum("kj,kjn->kn", d, jac[:, :3]) - np.einsum("kj,kjn->kn", lever, jac[:, 3:])
     return rows

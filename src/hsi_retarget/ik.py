@@ -156,8 +156,9 @@ class IKSolver:
             s: robot.model.getFrameId(f, pin.FrameType.BODY) for s, f in robot.tcp_frames.items()
         }
         self.spheres = robot_spheres(robot)
-        self._pairs = self.spheres.pairs()
-        self._bounds = LinkBounds(self.spheres)
+        pairs = self.spheres.pairs()
+        self._bounds = LinkBounds(self.spheres, pairs)
+        self._pairs = pairs if self._bounds.pairs is None else self._bounds.pairs  # the very array: culled
         self._layer: SceneLayer | None = None
         self._v_max = np.array(robot.v_max)
         self._jq = np.array([robot.q_index(n) for n in robot.joint_names], dtype=np.int64)
@@ -232,7 +233,9 @@ class IKSolver:
         if stacked:  # the posture acts in the null space of the tasks: no steady-state task error
             jac = np.vstack(stacked)[:, self.act]
             diff_act = diff[self.act]
-            diff[self.act] = diff_act - np.linalg.pinv(jac, rcond=1e-4) @ (jac @ diff_act)
+            _, sing, vt = np.linalg.svd(jac, full_matrices=False)
+            rows = vt[sing > 1e-4 * sing[0]]  # the tasks' row space (pinv's cut-off): J^+ J x = V V^T x
+            diff[self.act] = diff_act - rows.T @ (rows @ diff_act)
         hess[np.diag_indices(nv)] += self._posture_w + cfg.damping
         grad -= diff
         return hess, grad
@@ -344,10 +347,12 @@ class IKSolver:
         pin.framesForwardKinematics(self._model, self._data, np.asarray(q, dtype=np.float64))
         return self.spheres.world(self._data)
 
-    def clearance(self, q: F64) -> float:
+    def clearance(self, q: F64, within: float | None = None) -> float:
         """[m] smallest sphere clearance minus its margin (scene and self) at ``q``; ``inf`` when every pair
-        is farther than the activation distance beyond its margin."""
+        is farther than ``within`` [m] (default: the activation distance) beyond its margin (a smaller
+        ``within`` measures fewer pairs: cheaper when only a cut into the margins matters)."""
         cfg = self.config
+        reach = cfg.activation_distance if within is None else float(within)
         pairs = self._pairs if cfg.self_collision else np.zeros((0, 2), dtype=np.int64)
         margins = (cfg.scene_margin, cfg.tip_margin, cfg.self_margin)
         pin.framesForwardKinematics(self._model, self._data, np.asarray(q, dtype=np.float64))
@@ -358,12 +363,12 @@ class IKSolver:
             pairs,
             self.scene,
             margins,
-            activation=cfg.activation_distance,
+            activation=reach,
             bounds=self._bounds,
             links=links,
             extra=self._layer,
         )
-        return gap if gap < cfg.activation_distance else math.inf
+        return gap if gap < reach else math.inf
 
     def clearance_bound(self, q_from: F64, q_to: F64, clearance_from: float) -> float:
         """[m] a lower bound of :meth:`clearance` at ``q_to`` (nq,) from its value ``clearance_from`` [m]

@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 
 from hsi_planning.errors import ConfigError, RetargetError
 from hsi_planning.trajectory import WristTrajectory
-from hsi_retarget.carry_correction import correct_carry
+from hsi_retarget.carry_correction import carry_frames, correct_carry
 from hsi_retarget.finger_room import FingerRoomConfig, make_finger_room
 from hsi_retarget.grasp_depth import GraspDepthConfig, GraspWindow, grasp_windows, shape_grasps
 from hsi_retarget.grip_turn import (
@@ -184,21 +184,20 @@ def track(
     solver: IKSolver,
     cfg: RetargetConfig,
     *,
-    start: int = 0,
-    before: F64 | None = None,
     part: PartPhase | None = None,
+    events: Sequence[ContactEvent] = (),
 ) -> tuple[F64, dict[str, F64], dict[str, F64], dict[str, Any]]:
     """Frame-by-frame IK of ``goals``: configurations (T, nq), TCP position [m] and orientation [rad] errors
-    per side (T,) (NaN where inactive) and diagnostics (fallbacks, clearance, footsteps). With ``start`` > 0
-    the frames before it are those of ``before`` (T, nq) and the IK goes on from its frame ``start - 1``.
-    ``part``: an opened door or drawer kept clear of while it stands open (:mod:`hsi_retarget.part_scene`)."""
+    per side (T,) (NaN where inactive) and diagnostics (fallbacks, clearance, footsteps; with ``events``
+    the re-aimed ``goals`` and their ``carry_corrections``). ``part``: an opened door or drawer kept clear
+    of while it stands open (:mod:`hsi_retarget.part_scene`). ``events``: contact events in the goals' time
+    [s] whose carries are re-aimed from the TCP pose reached at their grasp as the IK gets there
+    (:func:`~hsi_retarget.carry_correction.correct_carry`)."""
     n = goals.t.shape[0]
     feet = plan_footsteps(robot, goals.t, goals.root, cfg.support) if robot.floating else None
     q = nominal_configuration(robot, goals.root[0], float(goals.lift[0]))
     qs = np.zeros((n, robot.nq))
-    if start > 0 and before is not None:
-        qs[:start] = before[:start]
-        q = np.array(before[start - 1])
+    carries, corrections = carry_frames(goals.t, events), []
     pos_err = {s: np.full(n, np.nan) for s in goals.tcp}
     ori_err = {s: np.full(n, np.nan) for s in goals.tcp}
     fallbacks, min_clear = 0, np.inf
@@ -206,7 +205,7 @@ def track(
     layer: tuple[SceneDistance | None, str] = (None, "")
     grippers = robot.gripper_joints
     fingers = {s: [robot.q_index(j) for j in grippers[s]] for s in goals.finger if s in grippers}
-    for i in range(start if before is not None else 0, n):
+    for i in range(n):
         now = (None, "") if part is None else part.at(float(goals.t[i]))
         if now[0] is not layer[0] or now[1] != layer[1]:
             layer = now
@@ -229,7 +228,7 @@ def track(
             com=feet.com[i] if feet is not None and np.isfinite(feet.com[i]).all() else None,
             contact={s: float(c[i]) for s, c in goals.contact.items() if goals.active[s][i] and c[i] > 0.0},
         )
-        if i == 0 or (i == start and before is None):
+        if i == 0:
             result = solver.solve(q, targets, cfg.initial_iterations)
             q, fallbacks = result.q, result.fallbacks
         else:
@@ -253,6 +252,9 @@ def track(
                 q, info = solver.step(q, targets, dt, q_start)
                 extra -= 1
         qs[i] = q
+        if i in carries:  # the hand closes here: carry from the pose it reached
+            goals, found, _ = correct_carry(goals, qs, robot, carries[i])
+            corrections += found
         pe, oe = solver.errors(q, targets)
         for s in pe:
             pos_err[s][i], ori_err[s][i] = pe[s], oe[s]
@@ -260,6 +262,8 @@ def track(
     diag: dict[str, Any] = {"qp_fallbacks": fallbacks, "min_collision_slack_m": float(min_clear)}
     if feet is not None:
         diag["footsteps"] = feet.steps
+    if events:
+        diag["goals"], diag["carry_corrections"] = goals, corrections
     return qs, pos_err, ori_err, diag
 
 
@@ -320,12 +324,9 @@ def retarget(
             goals, windows, object_prims(scene), solver, part=part, config=cfg.room
         )
     t1 = time.perf_counter()
-    qs, _, _, diag = track(goals, model, solver, cfg, part=part)
-    if cfg.correct_carry and motion.events:  # re-aim the carries from the reached grasp poses
-        goals, diag["carry_corrections"], first = correct_carry(goals, qs, model, motion.events)
-        if first is not None:
-            qs, _, _, again = track(goals, model, solver, cfg, start=first + 1, before=qs, part=part)
-            diag["qp_fallbacks"] += again["qp_fallbacks"]
+    carried = motion.events if cfg.correct_carry else ()  # re-aimed from the reached grasp poses
+    qs, _, _, diag = track(goals, model, solver, cfg, part=part, events=carried)
+    goals = diag.pop("goals", goals)
     qs, diag["smoothing_restored_frames"] = keep_clearance(solver, model, goals.t, qs, cfg.smoothing_hz)
     pos_err, ori_err = tcp_errors(model, goals, qs)
     t_ik = time.perf_counter() - t1

@@ -48,6 +48,7 @@ class SceneDistance:
         lo = verts.min(axis=0) - _BOUND_PAD
         shape = np.ceil((verts.max(axis=0) + _BOUND_PAD - lo) / _BOUND_CELL).astype(np.int64) + 1
         self._grid_origin, self._grid = lo, np.full(tuple(shape), np.nan)  # signed distance at the nodes
+        self._lifted_grid = np.full(tuple(shape), np.nan)  # the same without the ground meshes
 
     @classmethod
     def from_spec(cls, spec: object, exclude: Iterable[str] = ()) -> SceneDistance:
@@ -60,18 +61,21 @@ class SceneDistance:
         """(N,) [m] lower bounds of the distances of ``points`` (N, 3) [m]: the distance is 1-Lipschitz, so
         it is at least its value at the nearest node of a coarse grid (filled on demand) minus the way there.
         Points off that grid (more than its padding beyond the meshes) get ``-inf``."""
-        pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        return self._bound(np.asarray(points, dtype=np.float64).reshape(-1, 3), self._grid, self._scene)
+
+    def _bound(self, pts: F64, grid: F64, scene: o3d.t.geometry.RaycastingScene) -> F64:
+        """:meth:`lower_bound` from ``grid`` (filled on demand from ``scene``)."""
         idx = np.rint((pts - self._grid_origin) / _BOUND_CELL).astype(np.int64)
-        inside = np.all((idx >= 0) & (idx < np.asarray(self._grid.shape)), axis=1)
+        inside = np.all((idx >= 0) & (idx < np.asarray(grid.shape)), axis=1)
         bound = np.full(pts.shape[0], -np.inf)
         if inside.any():
             cells = idx[inside]
             nodes = self._grid_origin + cells * _BOUND_CELL
-            values = self._grid[cells[:, 0], cells[:, 1], cells[:, 2]]
+            values = grid[cells[:, 0], cells[:, 1], cells[:, 2]]
             todo = np.isnan(values)
             if todo.any():
-                values[todo] = self._exact(nodes[todo])[0]
-                self._grid[cells[todo, 0], cells[todo, 1], cells[todo, 2]] = values[todo]
+                values[todo] = self._exact(nodes[todo], scene)[0]
+                grid[cells[todo, 0], cells[todo, 1], cells[todo, 2]] = values[todo]
             bound[inside] = values - np.linalg.norm(pts[inside] - nodes, axis=1)
         return bound
 
@@ -82,14 +86,19 @@ class SceneDistance:
         (:meth:`lower_bound`); the others get their lower bound (>= ``reach``) and a zero gradient. Points
         where ``grounded`` (N,) is False are measured without the ground meshes (default: all with)."""
         pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-        dist = self.lower_bound(pts)  # without a mesh the distance only grows: still a lower bound
+        dist = self.lower_bound(pts)
         grad = np.zeros((pts.shape[0], 3))
-        near = dist < np.asarray(reach, dtype=np.float64)
         if grounded is not None and self._lifted is not None:
-            raised = near & ~np.asarray(grounded, dtype=bool)
-            near &= np.asarray(grounded, dtype=bool)
+            raised = ~np.asarray(grounded, dtype=bool)
+            if raised.any():  # without the ground meshes: a bound of their own
+                dist[raised] = self._bound(pts[raised], self._lifted_grid, self._lifted)
+            near = dist < np.asarray(reach, dtype=np.float64)
+            raised &= near
+            near &= ~raised
             if raised.any():
                 dist[raised], grad[raised] = self._exact(pts[raised], self._lifted)
+        else:
+            near = dist < np.asarray(reach, dtype=np.float64)
         if near.any():
             dist[near], grad[near] = self._exact(pts[near])
         return dist, grad

@@ -54,7 +54,7 @@ def _bad_frames(
     for i in np.flatnonzero(check):
         if np.allclose(raw[i], path[i], atol=1e-6):
             continue
-        c = solver.clearance(path[i])
+        c = solver.clearance(path[i], within=-tolerance)  # inf unless it cuts deeper than tolerance
         bad[i] = c < -tolerance and c < solver.clearance(raw[i]) - tolerance
     return bad
 
