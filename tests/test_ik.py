@@ -295,3 +295,24 @@ def test_a_hand_at_a_contact_wins_over_the_base_goal(robots: dict[str, RobotMode
     assert errors[1] < 0.5 * errors[0] and errors[0] > 0.01
     with pytest.raises(ConfigError):
         IKConfig(contact_position_factor=0.5)
+
+
+def test_the_base_turns_the_long_way_round_when_the_short_way_ends_past_its_yaw_limit(
+    robots: dict[str, RobotModel],
+) -> None:
+    robot = robots["dual_ur5e"]
+    yaw = robot.q_index("base_yaw_joint")
+    lower = float(robot.q_lower[yaw])
+    q = np.array(robot.q_home)
+    q[yaw] = lower + 0.1  # near the lower limit; the goal is 0.3 rad short of it the short way round
+    goal = np.eye(4)
+    goal[:3, :3] = Rotation.from_euler("z", lower - 0.2).as_matrix()
+    solver = IKSolver(robot, IKConfig(self_collision=False))
+    targets = IKTargets(root=goal)
+    turned = []
+    for _ in range(40):
+        q, _ = solver.step(q, targets, dt=1.0 / 60.0)
+        turned.append(q[yaw])
+        assert robot.within_limits(q)
+    assert turned[-1] > lower + 0.5  # under way the long way round, not pressed against the limit
+    assert np.all(np.diff(turned) > -1e-9)

@@ -337,3 +337,25 @@ def test_aside_spots_keep_a_top_down_take_out_free_without_excluding_everything(
     front = np.array([-1.0, 0.0, 0.0])  # a horizontal take-out still excludes its strip
     strip = free_spots(kitchen, state, "can1", cloud, avoid=(start, front, 0.05), limit=50)
     assert all(not ((p[0] - start[0]) * -1.0 > -0.05 and abs(p[1] - start[1]) < 0.05) for _, p in strip)
+
+
+def test_a_short_clear_move_behind_is_stepped_there_without_turning_round(kitchen: SceneWorld) -> None:
+    from hsi_planning.scheduler.actions import TaskRun
+    from hsi_planning.scheduler.body import HipPose
+    from hsi_planning.scheduler.config import SchedulerConfig
+    from hsi_planning.scheduler.timeline import Timeline
+    from hsi_planning.scheduler.world import WorldState
+
+    cfg = SchedulerConfig()
+    start = HipPose.standing(np.array([0.0, 0.0]), 0.0, cfg.body)
+    run = TaskRun(kitchen, None, cfg, Timeline(cfg.body, start, {}), WorldState())  # type: ignore[arg-type]
+    floor = run.floor()
+    stance = HipPose.standing(np.array([-0.25, 0.2]), -0.42, cfg.body)  # 32 cm behind, facing ahead
+    assert floor.segment_clear(start.xy, stance.xy, cfg.body.body_radius)
+    looped = plan_root_path(floor, start.xy, stance.xy, stance.heading, radius=0.25, config=cfg.navigation)
+    assert np.linalg.norm(np.diff(looped, axis=0), axis=1).sum() > 0.6  # to arrive facing ahead: a loop
+    run.go_to(stance, floor, "a test")
+    roots = [k for k in run.timeline.keyframes if k.key_joint == "root"]
+    yaws = np.unwrap([Rotation.from_quat(k.quaternion).as_euler("ZYX")[0] for k in roots])
+    assert np.all(np.abs(yaws) <= 0.42 + 1e-6), yaws  # no turn beyond the stance's heading
+    assert np.linalg.norm(roots[-1].position[:2] - stance.xy) < 1e-9

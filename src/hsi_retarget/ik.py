@@ -171,6 +171,12 @@ class IKSolver:
             self._pelvis = robot.model.getFrameId(robot.description.links[0].name, pin.FrameType.BODY)
         self._base_v = [robot.v_index(j) for j in BASE_JOINTS if j in robot.joint_names]
         self._base_q = [robot.q_index(j) for j in BASE_JOINTS if j in robot.joint_names]
+        #: [rad] the base yaw's range (a holonomic base turns within it, the long way round if need be)
+        self._yaw_range = (
+            (float(robot.q_lower[self._base_q[2]]), float(robot.q_upper[self._base_q[2]]))
+            if len(self._base_q) == 3
+            else (-math.inf, math.inf)
+        )
         self._lift = (
             (robot.q_index(LIFT_JOINT), robot.v_index(LIFT_JOINT))
             if LIFT_JOINT in robot.joint_names
@@ -221,6 +227,9 @@ class IKSolver:
                 yaw = math.atan2(goal[1, 0], goal[0, 0])
                 err = np.array([goal[0, 3], goal[1, 3], yaw]) - q[self._base_q]
                 err[2] = (err[2] + math.pi) % (2 * math.pi) - math.pi
+                yaw_at, lo, hi = q[self._base_q[2]], self._yaw_range[0], self._yaw_range[1]
+                if not lo <= yaw_at + err[2] <= hi:  # the short way round ends past the yaw limit
+                    err[2] -= math.copysign(2.0 * math.pi, err[2])
                 jac = np.zeros((3, nv))
                 jac[[0, 1, 2], self._base_v] = 1.0
                 add(jac, err, np.full(3, root_weight))

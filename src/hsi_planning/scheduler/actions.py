@@ -104,9 +104,14 @@ class TaskRun:
             if np.linalg.norm(stance.xy - start.xy) > 0.02:
                 tl.step(f"step to ({stance.xy[0]:.2f}, {stance.xy[1]:.2f}) m for {why}, still holding")
         elif np.linalg.norm(stance.xy - start.xy) > 0.02:
-            path = plan_root_path(
-                floor, start.xy, stance.xy, stance.heading, radius=body.body_radius, config=nav
-            )
+            if np.linalg.norm(stance.xy - start.xy) < nav.side_step_length and floor.segment_clear(
+                start.xy, stance.xy, body.body_radius
+            ):  # a few steps straight there (the fast-marching path may loop round to arrive facing ahead)
+                path = np.vstack([start.xy, stance.xy])
+            else:
+                path = plan_root_path(
+                    floor, start.xy, stance.xy, stance.heading, radius=body.body_radius, config=nav
+                )
             if abs(start.position[2] - body.standing_height) > 1e-6 or abs(start.pitch) > 1e-6:
                 up = HipPose.standing(start.xy, start.yaw, body)
                 tl.move_hip(up, self._posture_time(start, up), "navigate")

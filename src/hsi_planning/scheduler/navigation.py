@@ -50,7 +50,9 @@ class NavigationConfig:
     walk_speed: float = 0.8  #: [m/s] walking speed of the root
     turn_speed: float = 2.0  #: [rad/s] turning speed in place
     keyframe_spacing: float = 0.3  #: [m] root keyframe spacing along a path
-    side_step_length: float = 0.6  #: [m] shorter paths are stepped without turning to walk along them
+    #: [m] shorter paths, and goals closer than this along a clear straight line, are stepped (straight
+    #: there) without turning to walk along them
+    side_step_length: float = 0.6
     smooth_window: int = 5  #: [cells] moving-average window of the path smoothing
 
     def __post_init__(self) -> None:
