@@ -31,7 +31,7 @@ from hsi_planning.implicit.path import (
     time_path,
 )
 from hsi_planning.implicit.planner import ImplicitPlanner, ImplicitPlannerConfig
-from hsi_planning.implicit.prior import contact_point, rotation_between, transfer_orientation
+from hsi_planning.implicit.prior import contact_point, face_approach, rotation_between, transfer_orientation
 from hsi_planning.implicit.problem import make_problem, problem_fields
 from hsi_planning.implicit.runtime_field import (
     SegmentContext,
@@ -95,6 +95,21 @@ def test_transfer_orientation_gives_orthonormal_frames_and_keeps_the_contact() -
     # consecutive frames turn smoothly (no jumps) [rad per sample]
     steps = (Rotation.from_quat(quat[1:]).inv() * Rotation.from_quat(quat[:-1])).magnitude()
     assert steps.max() < 0.1
+
+
+def test_a_contact_pointing_off_the_approach_axis_is_turned_to_face_it() -> None:
+    path = np.column_stack([np.linspace(0.0, 0.5, 51), np.zeros(51), np.full(51, 0.8)])
+    down = Rotation.from_euler("y", 90, degrees=True)  # wrist x straight down: a top-down grasp
+    quat = np.tile(down.as_quat(), (51, 1))
+    front = np.array([-1.0, 0.0, 0.0])  # a cabinet's opening faces -x: the hand moves in along +x
+    turned = face_approach(quat, path, front, np.radians(45.0), 0.2)
+    x_axes = Rotation.from_quat(turned).apply([1.0, 0.0, 0.0])
+    np.testing.assert_allclose(x_axes[-1], [1.0, 0.0, 0.0], atol=1e-9)  # the contact faces the front
+    np.testing.assert_allclose(turned[:40], quat[:40], atol=1e-12)  # before the blend: as transferred
+    steps = (Rotation.from_quat(turned[1:]).inv() * Rotation.from_quat(turned[:-1])).magnitude()
+    assert steps.max() < 0.25 and (np.einsum("ij,ij->i", turned[1:], turned[:-1]) > 0.0).all()
+    tilted = np.tile(Rotation.from_euler("y", 30, degrees=True).as_quat(), (51, 1))  # 30 deg off: kept
+    np.testing.assert_array_equal(face_approach(tilted, path, front, np.radians(45.0), 0.2), tilted)
 
 
 def test_transfer_orientation_on_the_prior_path_returns_the_prior() -> None:

@@ -65,7 +65,7 @@ class GraspDepthConfig:
     standoff: float = 0.08
     #: Its length for a top-down approach (within 30 deg of straight down) or placement; at least
     #: ``standoff``: the gripper comes down from above the walls of an open drawer or box [m].
-    top_standoff: float = 0.28
+    top_standoff: float = 0.2
     #: Shortest straight part (at most 60 % of its approach or withdrawal) [s].
     straight_min_s: float = 0.3
     #: Shortest straight part of a grasp approach as a share of the approach (at most 0.6) [-].

@@ -54,6 +54,9 @@ class ImplicitPlannerConfig:
     blend_fraction: float = (
         0.2  #: [-] share of the path before the contact blended into the prior's orientation
     )
+    #: [deg] a matched prior whose contact wrist points farther than this from the approach axis (a
+    #: top-down grasp for a cabinet's front opening) is turned onto it over the blend (180: never)
+    contact_facing_angle: float = 45.0
     lift_height: float = 0.04  #: [m] least vertical lift (set-down) at a contact where an object is carried
     max_lift: float = 0.3  #: [m] the lift rises above neighbours and container walls up to this height
     #: [m] lift of a held object whose hidden top may reach the ceiling observed above it (a bottle
@@ -126,6 +129,8 @@ class ImplicitPlannerConfig:
             raise ConfigError(f"min_speed {self.min_speed} must be below max_speed {self.max_speed} [m/s]")
         if not 0.0 <= self.blend_fraction <= 1.0:
             raise ConfigError(f"blend_fraction={self.blend_fraction} must be in [0, 1]")
+        if not 0.0 <= self.contact_facing_angle <= 180.0:
+            raise ConfigError(f"contact_facing_angle={self.contact_facing_angle} must be in [0, 180] deg")
         if self.timing not in TIMING_MODES:
             raise ConfigError(f"timing={self.timing!r} must be one of {list(TIMING_MODES)}")
         if self.repair not in REPAIR_MODES:

@@ -271,3 +271,24 @@ def blend_start(quat: F64, q0: F64, fraction: float) -> F64:
         if float(out[i] @ out[i - 1]) < 0.0:
             out[i] = -out[i]
     return np.asarray(out, dtype=np.float64)
+
+
+def face_approach(quat: F64, positions: F64, axis: ArrayLike, max_angle: float, fraction: float) -> F64:
+    """The orientations ``quat`` (N, 4) [x y z w] of a path ``positions`` (N, 3) [m] (approach order, the
+    contact last) turned so that the contact's wrist x axis lies within ``max_angle`` [rad] of
+    ``-axis`` (3,) (the hand moves in against the approach axis): when it is farther off, the minimal
+    world-frame rotation onto ``-axis`` is eased in over the last ``fraction`` of the arc length (full at
+    the contact). Within ``max_angle`` the orientations are returned unchanged."""
+    q = np.asarray(quat, dtype=np.float64)
+    want = -np.asarray(axis, dtype=np.float64).reshape(3)
+    want = want / max(float(np.linalg.norm(want)), 1e-12)
+    wrist_x = Rotation.from_quat(q[-1]).apply([1.0, 0.0, 0.0])
+    if float(np.arccos(np.clip(wrist_x @ want, -1.0, 1.0))) <= max_angle:
+        return q
+    turn = rotation_between(wrist_x[None], want[None])[0].as_rotvec()
+    arc = _arc(np.asarray(positions, dtype=np.float64))
+    u = arc / arc[-1] if arc[-1] > 1e-9 else np.ones(q.shape[0])
+    x = np.clip((u - (1.0 - fraction)) / max(fraction, 1e-9), 0.0, 1.0)
+    weight = x * x * (3.0 - 2.0 * x)
+    out = (Rotation.from_rotvec(weight[:, None] * turn[None]) * Rotation.from_quat(q)).as_quat()
+    return _continuous(np.asarray(out, dtype=np.float64))

@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import logging
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -29,7 +30,7 @@ from hsi_planning.implicit.path import (
     smooth_path,
     time_path,
 )
-from hsi_planning.implicit.prior import transfer_orientation
+from hsi_planning.implicit.prior import face_approach, transfer_orientation
 from hsi_planning.implicit.runtime_field import (
     TOP_DOWN,
     UNDER_RADIUS,
@@ -400,7 +401,7 @@ def plan_segment(
             failures.append(f"{kind} (margin {margin:.3f} m): {error}")
             best = found if best is None or clear > best.clear else best
             continue
-        return _finish(found, prior, cfg.blend_fraction, failures, t0)
+        return _finish(found, prior, ctx, failures, t0)
     if best is not None and best.clear >= -cfg.relaxed_margin:
         _LOG.warning(
             "no path keeps the full clearance; taking the %s one %.1f mm short of it (relaxed_margin "
@@ -409,7 +410,7 @@ def plan_segment(
             -1e3 * best.clear,
             1e3 * cfg.relaxed_margin,
         )
-        return _finish(best, prior, cfg.blend_fraction, failures, t0)
+        return _finish(best, prior, ctx, failures, t0)
     assert error is not None
     raise PlanningError("no collision-free path; tried " + "; ".join(failures)) from error
 
@@ -427,12 +428,17 @@ class _Found:
 
 
 def _finish(
-    found: _Found, prior: WristTrajectory, blend: float, failures: list[str], t0: float
+    found: _Found, prior: WristTrajectory, ctx: SegmentContext, failures: list[str], t0: float
 ) -> SegmentPlan:
-    """The segment plan of ``found`` with the orientation transferred from ``prior``."""
+    """The segment plan of ``found`` with the orientation transferred from ``prior`` (its contact turned
+    to face along the approach axis where it points elsewhere)."""
     pp = prior.position if prior.segment == "approach" else prior.position[::-1]
     pq = prior.quaternion if prior.segment == "approach" else prior.quaternion[::-1]
+    blend = ctx.config.blend_fraction
     quat = transfer_orientation(pp, pq, found.position, blend)
+    if ctx.approach_axis is not None:
+        limit = math.radians(ctx.config.contact_facing_angle)
+        quat = face_approach(quat, found.position, ctx.approach_axis, limit, blend)
     info = {
         "field": "hybrid" if found.kind == "learned" and found.share < 0.999 else found.kind,
         "learned_share": found.share,
