@@ -440,3 +440,20 @@ def test_counter_task_succeeds_through_the_launch_file(dual_arm: TaskOutcome, tm
     dwell = dual_arm.trajectory.meta["gripper_dwell_s"]  # sim_check_node adds it after the topic
     assert outcome.trajectory.duration + dwell == pytest.approx(dual_arm.trajectory.duration, abs=0.1)
     assert (tmp_path / "plots" / "counter_can.png").exists()
+
+
+def test_the_diagnosis_names_a_grasp_the_ik_ended_short_of() -> None:
+    from hsi_nodes.demo.pipeline import failed_report
+    from hsi_retarget.joint_trajectory import JointTrajectory
+
+    task = DemoTask("x", "kitchen", (0.0, 0.0, 0.9), object_name="bottle2")
+    meta = {
+        "carry_corrections": [
+            {"hand": "left", "object": "bottle2", "time_s": 7.2, "position_m": 0.062, "angle_deg": 24.0},
+            {"hand": "right", "object": "can1", "time_s": 9.0, "position_m": 0.004, "angle_deg": 2.0},
+        ]
+    }
+    trajectory = JointTrajectory("dual_ur5e", np.zeros(1), np.zeros((1, 2)), ("a", "b"), meta=meta)
+    outcome = TaskOutcome(task, failed_report(task, "bottle2", PipelineConfig(), "x"), trajectory=trajectory)
+    (line,) = outcome.diagnosis()  # a 4 mm correction is within the IK tolerance: not reported
+    assert "left hand closed 0.062 m and 24 deg off its planned grasp of bottle2 at 7.2 s" in line

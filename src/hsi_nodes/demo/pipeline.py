@@ -148,7 +148,8 @@ class TaskOutcome:
 
     def diagnosis(self, ik_error_m: float = 0.02) -> list[str]:
         """What went wrong on the way, beyond the judge's failures: unreachable goals, IK misses larger
-        than ``ik_error_m`` [m], failed grasps, a door or drawer that did not open."""
+        than ``ik_error_m`` [m] (also at a grasp, where the hand then closed off the object), failed grasps,
+        a door or drawer that did not open."""
         out: list[str] = []
         meta = self.trajectory.meta if self.trajectory is not None else {}
         for u in meta.get("unreachable", []):
@@ -161,6 +162,13 @@ class TaskOutcome:
                 out.append(
                     f"IK missed the {u['side']} TCP goal by up to {u['max_error_m']:.3f} m "
                     f"({u['t_start']:.1f}-{u['t_end']:.1f} s of the schedule)"
+                )
+        for c in meta.get("carry_corrections", []):  # the IK ended short of a grasp: the hand closed there
+            if c["position_m"] > ik_error_m:
+                out.append(
+                    f"the {c['hand']} hand closed {c['position_m']:.3f} m and {c['angle_deg']:.0f} deg off "
+                    f"its planned grasp of {c['object']} at {c['time_s']:.1f} s of the schedule (the IK "
+                    "ended short; the carry follows from there)"
                 )
         for g in self.report.grasps:
             if g.kind == "failed":
