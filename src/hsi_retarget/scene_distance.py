@@ -86,18 +86,19 @@ class SceneDistance:
         (:meth:`lower_bound`); the others get their lower bound (>= ``reach``) and a zero gradient. Points
         where ``grounded`` (N,) is False are measured without the ground meshes (default: all with)."""
         pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-        dist = self.lower_bound(pts)
         grad = np.zeros((pts.shape[0], 3))
         if grounded is not None and self._lifted is not None:
             raised = ~np.asarray(grounded, dtype=bool)
-            if raised.any():  # without the ground meshes: a bound of their own
-                dist[raised] = self._bound(pts[raised], self._lifted_grid, self._lifted)
+            dist = np.empty(pts.shape[0])
+            dist[~raised] = self._bound(pts[~raised], self._grid, self._scene)
+            dist[raised] = self._bound(pts[raised], self._lifted_grid, self._lifted)  # a grid of their own
             near = dist < np.asarray(reach, dtype=np.float64)
             raised &= near
             near &= ~raised
             if raised.any():
                 dist[raised], grad[raised] = self._exact(pts[raised], self._lifted)
         else:
+            dist = self.lower_bound(pts)
             near = dist < np.asarray(reach, dtype=np.float64)
         if near.any():
             dist[near], grad[near] = self._exact(pts[near])

@@ -183,6 +183,13 @@ def rotation_between(a: ArrayLike, b: ArrayLike) -> Rotation:
     return Rotation.from_rotvec(axis * angle[:, None])
 
 
+def _end_weight(u: F64, fraction: float) -> F64:
+    """(N,) smoothstep weight over the last ``fraction`` of the normalised arc length ``u`` (N,): 0 before
+    it, 1 at the end."""
+    x = np.clip((u - (1.0 - fraction)) / max(fraction, 1e-9), 0.0, 1.0)
+    return np.asarray(x * x * (3.0 - 2.0 * x))
+
+
 def _continuous(quat: F64) -> F64:
     out = np.array(quat, dtype=np.float64, copy=True)
     for i in range(1, out.shape[0]):
@@ -246,8 +253,7 @@ def transfer_orientation(
         tp_at /= np.linalg.norm(tp_at, axis=1, keepdims=True)
         out = rotation_between(tp_at, t_n) * q_prior
         if blend_fraction > 0.0:
-            x = np.clip((u_n - (1.0 - blend_fraction)) / blend_fraction, 0.0, 1.0)
-            w = x * x * (3.0 - 2.0 * x)
+            w = _end_weight(u_n, blend_fraction)
             rel = (out.inv() * q_prior).as_rotvec()
             out = out * Rotation.from_rotvec(rel * w[:, None])
     quat = np.asarray(out.as_quat(), dtype=np.float64)
@@ -288,7 +294,6 @@ def face_approach(quat: F64, positions: F64, axis: ArrayLike, max_angle: float, 
     turn = rotation_between(wrist_x[None], want[None])[0].as_rotvec()
     arc = _arc(np.asarray(positions, dtype=np.float64))
     u = arc / arc[-1] if arc[-1] > 1e-9 else np.ones(q.shape[0])
-    x = np.clip((u - (1.0 - fraction)) / max(fraction, 1e-9), 0.0, 1.0)
-    weight = x * x * (3.0 - 2.0 * x)
+    weight = _end_weight(u, fraction)
     out = (Rotation.from_rotvec(weight[:, None] * turn[None]) * Rotation.from_quat(q)).as_quat()
     return _continuous(np.asarray(out, dtype=np.float64))
