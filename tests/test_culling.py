@@ -37,24 +37,19 @@ def test_lower_bound_never_exceeds_the_distance(kitchen: SceneDistance) -> None:
     assert np.mean(exact[on_grid] - bound[on_grid]) < 0.08  # useful: within a grid cell's reach on average
     again = kitchen.lower_bound(points)  # cached nodes give the same bound
     assert np.array_equal(bound, again)
-    reach = np.full(points.shape[0], 0.1)
-    dist, grad = kitchen.query_within(points, reach)
-    near = exact < 0.1
-    assert np.allclose(dist[near], exact[near], atol=1e-6)
-    assert np.all(dist[~near] >= np.minimum(exact[~near], 0.1) - 1e-6)
-    assert np.all(dist <= exact + 1e-5)
-    assert np.allclose(np.linalg.norm(grad[dist < 0.1], axis=1), 1.0)
-    # points measured without the floor (a robot's base) get their own bound and exact distance
+    # points measured and bounded without the floor (a robot's base) get their own bound and exact distance
     meshes = scene_meshes(load_scene("kitchen"))
     lifted = SceneDistance({n: m for n, m in meshes.items() if n != "floor"})
     raised = np.arange(points.shape[0]) % 2 == 0
-    dist, _ = kitchen.query_within(points, reach, grounded=~raised)
+    dist, grad = kitchen.query(points, grounded=~raised)
     no_floor, _ = lifted.query(points)
-    near = raised & (no_floor < 0.1)
-    assert near.sum() > 20
-    assert np.allclose(dist[near], no_floor[near], atol=1e-6)
-    assert np.all(dist[raised] <= no_floor[raised] + 1e-5)
-    assert np.all(dist[raised & ~near] >= 0.1 - 1e-6)
+    assert np.allclose(dist[raised], no_floor[raised], atol=1e-6)
+    assert np.allclose(dist[~raised], exact[~raised], atol=1e-6)
+    assert np.allclose(np.linalg.norm(grad, axis=1), 1.0)
+    assert np.any(no_floor[raised] > exact[raised] + 0.1)  # the floor matters for some of them
+    bound = kitchen.lower_bound(points, grounded=~raised)
+    assert np.all(bound <= dist + 1e-5), float((bound - dist).max())
+    assert np.mean((dist - bound)[np.isfinite(bound)]) < 0.08
 
 
 @pytest.mark.parametrize("name", ["dual_ur5e", "humanoid"])
@@ -108,6 +103,38 @@ def test_culled_rows_and_clearance_equal_the_full_check(name: str, kitchen: Scen
     assert compared >= 10
     with pytest.raises(RetargetError, match="repeated"):
         LinkBounds(spheres, np.vstack([pairs, pairs[:1]]))
+
+
+def test_cached_candidates_give_the_same_rows_and_clearances_along_a_path(kitchen: SceneDistance) -> None:
+    robot = RobotModel("dual_ur5e")
+    cached = IKSolver(robot, IKConfig(candidate_slack=0.05), kitchen)
+    fresh = IKSolver(robot, IKConfig(candidate_slack=0.0), kitchen)
+    assert cached._cache is not None and fresh._cache is None
+    rng = np.random.default_rng(5)
+    q = np.array(robot.q_home)
+    q[robot.q_index("base_x_joint")], q[robot.q_index("base_y_joint")] = 1.6, 1.0  # among the furniture
+    arms = np.concatenate([robot.arm_q_indices(s) for s in ("left", "right")])
+    near = 0
+    for k in range(150):  # small steps (a few share one choice), and now and then a jump (a new one)
+        q[arms] += rng.normal(0.0, 0.3 if k % 25 == 0 else 0.01, arms.shape[0])
+        q[arms] = np.clip(q[arms], robot.q_lower[arms], robot.q_upper[arms])
+        rows = []
+        for solver in (cached, fresh):
+            pin.computeJointJacobians(robot.model, solver._data, q)
+            pin.updateFramePlacements(robot.model, solver._data)
+            rows.append(solver._collision_rows(q))
+        np.testing.assert_array_equal(rows[0][0], rows[1][0])
+        np.testing.assert_array_equal(rows[0][1], rows[1][1])
+        assert rows[0][2] == rows[1][2]
+        assert cached.clearance(q, within=0.05) == fresh.clearance(q, within=0.05)
+        near += rows[0][0].shape[0] > 0
+    assert near > 50  # the rows were not all empty
+    assert cached._cache.hits > 100 and 5 < cached._cache.misses < 150
+    holder = SceneDistance.from_spec(load_scene("kitchen"))
+    cached.set_part_scene(holder, "left")  # another scene layer: chosen anew
+    misses = cached._cache.misses
+    cached.clearance(q)
+    assert cached._cache.misses == misses + 1
 
 
 def test_body_box_corners_are_covered_and_the_floor_is_no_body_obstacle() -> None:

@@ -478,6 +478,51 @@ def test_carry_is_reaimed_from_the_reached_grasp_pose(dual: RobotModel) -> None:
     assert none == [] and start is None and unchanged.tcp["left"] is not fixed.tcp["left"]
 
 
+def test_a_carry_is_moved_to_put_the_object_on_its_placement(dual: RobotModel) -> None:
+    from hsi_retarget.carry_correction import place_carries
+    from hsi_retarget.mapping import RobotGoals
+
+    n = 121
+    t = np.linspace(0.0, 4.0, n)
+    grasp = dual.frame_pose(dual.q_home, dual.tcp_frames["left"])
+    bottom = grasp[:3, 3] + grasp[:3, :3] @ np.array([0.03, 0.02, 0.0])  # held 3.6 cm off the TCP
+    release = np.array(grasp)  # planned 30 cm further, the gripper turned half round its approach axis
+    release[:3, :3] = grasp[:3, :3] @ Rotation.from_rotvec([0.0, 0.0, np.pi]).as_matrix()
+    release[:3, 3] += [0.3, 0.0, 0.0]
+    tcp = np.tile(grasp, (n, 1, 1))
+    tcp[t >= 2.0] = release
+    goals = RobotGoals(
+        t=t,
+        tcp={"left": tcp},
+        active={"left": np.ones(n, bool)},
+        reachable={"left": np.ones(n, bool)},
+        reach_excess={"left": np.zeros(n)},
+        root=np.tile(np.eye(4), (n, 1, 1)),
+        lift=np.full(n, np.nan),
+        shoulder={"left": np.zeros((n, 3))},
+        scale=1.0,
+    )
+    events = (ContactEvent(1.0, "left", "grasp", "can1"), ContactEvent(3.0, "left", "release", "can1"))
+    place = bottom + [0.3, 0.0, 0.0]  # where the planner meant it: the turn was not accounted for
+    carries = [{"object": "can1", "hands": ["left"], "grasp": bottom.tolist(), "place": place.tolist()}]
+    moved, records = place_carries(goals, events, carries, ease_s=0.5)
+    out = moved.tcp["left"]
+    i, r = (int(np.searchsorted(t, x - 1e-9)) for x in (1.0, 3.0))
+    held = np.linalg.solve(out[i], np.append(bottom, 1.0))
+    np.testing.assert_allclose((out[r] @ held)[:3], place, atol=1e-9)  # the object lands on its placement
+    before = np.linalg.solve(tcp[i], np.append(bottom, 1.0))
+    np.testing.assert_allclose(held, before, atol=1e-12)  # the grasp itself is not moved
+    np.testing.assert_allclose(out[: i + 1], tcp[: i + 1], atol=1e-12)
+    np.testing.assert_allclose(out[:, :3, :3], tcp[:, :3, :3])  # only translated
+    np.testing.assert_allclose(out[t > 3.5 + 1e-9], tcp[t > 3.5 + 1e-9], atol=1e-12)  # eased out after
+    shift = out[:, :3, 3] - tcp[:, :3, 3]
+    assert np.all(np.diff(np.linalg.norm(shift[i : r + 1], axis=1)) >= -1e-12)  # eased in along the carry
+    assert len(records) == 1 and np.linalg.norm(records[0]["shift_m"]) == pytest.approx(2 * np.hypot(0.03, 0.02))
+    same, none = place_carries(goals, events, [{**carries[0], "place": (tcp[r] @ before)[:3].tolist()}])
+    assert none == [] and np.array_equal(same.tcp["left"], tcp)  # consistent already: nothing to do
+    assert place_carries(goals, events, [{"object": "can1", "hands": ["left"], "grasp": [0, 0, 0]}])[1] == []
+
+
 def test_smoothing_keeps_the_path_where_it_costs_no_clearance(dual: RobotModel) -> None:
     from hsi_retarget.ik import IKSolver
     from hsi_retarget.smoothing import keep_clearance, smooth_joints

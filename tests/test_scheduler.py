@@ -240,6 +240,11 @@ def test_box_two_handed_grasp_carry_and_place(scenarios: dict[str, Schedule], ki
         grasps[0].position + grasps[1].position
     )
     np.testing.assert_allclose(moved, np.array([0.72, -0.25, 0.9]) - box, atol=0.02)
+    # the carry's record for the retargeting: both hands, its bottom centre at the grasp, its placement
+    (carry,) = s.info["carries"]
+    assert carry["object"] == "box1" and sorted(carry["hands"]) == ["left", "right"]
+    np.testing.assert_allclose(carry["grasp"], box, atol=0.02)
+    np.testing.assert_allclose(carry["place"], [0.72, -0.25, 0.9], atol=1e-12)
 
 
 def test_blocker_moved_first_then_target_then_put_back(
@@ -259,6 +264,9 @@ def test_blocker_moved_first_then_target_then_put_back(
     assert abs(aside[1] - can[1]) > 0.035 + 0.033
     home = object_pose(narrow.spec, "bottle1")[:3, 3]
     assert abs(places[1].position[-1][1] - home[1]) < 0.02
+    carried = [(c["object"], "place" in c) for c in s.info["carries"]]  # the can is not put down here
+    assert carried == [("bottle1", True), ("can1", False), ("bottle1", True)]
+    np.testing.assert_allclose(s.info["carries"][2]["place"][:2], home[:2], atol=0.02)
 
 
 def test_unknown_or_held_target_and_no_free_hand(kitchen: SceneWorld) -> None:

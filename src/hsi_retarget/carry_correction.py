@@ -8,6 +8,14 @@ release into ``T(t) D`` with the grasp error ``D = T_g^-1 T'_g`` (planned grasp 
 TCP pose ``T'_g``, both (4, 4) world): the goal is the reached pose at the grasp, and the object ends at
 its planned placement. ``D`` eases out over ``ease_s`` after the release (the hand leaves from where it
 let go). Errors below ``min_position`` and ``min_angle_deg`` are left alone.
+
+The planned goals themselves need not carry the object to its placement: the gripper is turned about its
+approach axis at a grasp or a release to grip across an object or where the fingers have room, and a
+one-handed place reaches the object's new spot along that support's approach axis, so the hand need not
+hold the object at the release as at the grasp. :func:`place_carries` moves each carry's goals by the
+translation that puts the object's bottom centre, carried rigidly from its grasp goal to its release goal,
+on its placement (eased in over the carry, out after the release), from the schedule's record of both
+(``Schedule.info["carries"]``).
 """
 
 from __future__ import annotations
@@ -25,7 +33,7 @@ from hsi_retarget.joint_trajectory import ContactEvent
 from hsi_retarget.mapping import RobotGoals
 from hsi_retarget.robots import RobotModel
 
-__all__ = ["carry_frames", "correct_carry"]
+__all__ = ["carry_frames", "correct_carry", "place_carries"]
 
 F64 = NDArray[np.float64]
 
@@ -104,3 +112,54 @@ def correct_carry(
         )
         first = i if first is None else min(first, i)
     return replace(goals, tcp=tcp), records, first
+
+
+def place_carries(
+    goals: RobotGoals,
+    events: Sequence[ContactEvent],
+    carries: Sequence[dict[str, Any]],
+    *,
+    min_position: float = 0.003,
+    ease_s: float = 0.5,
+) -> tuple[RobotGoals, list[dict[str, Any]]]:
+    """``goals`` whose carries put each object down on its placement (see the module docstring; event
+    times in the goals' time [s]). ``carries``: the schedule's records (``object``, ``hands``, ``grasp`` and
+    ``place`` bottom centres (3,) [m]), matched to the grasp events of the same object in order. Shifts
+    below ``min_position`` [m] are left alone. Returns the goals and one record per shifted carry
+    (``object``, ``time_s`` [s] of its grasp, ``shift_m`` (3,) [m])."""
+    t = goals.t
+    tcp = {s: np.array(p) for s, p in goals.tcp.items()}
+    records: list[dict[str, Any]] = []
+    grasps: dict[str, list[float]] = {}
+    for hand, name, t_grasp, t_release in _carries(events):
+        if hand in tcp and t_release is not None and t_grasp not in grasps.setdefault(name, []):
+            grasps[name].append(t_grasp)
+    for name, times in grasps.items():
+        own = [c for c in carries if c.get("object") == name]
+        for t_grasp, record in zip(sorted(times), own, strict=False):
+            if "place" not in record or "grasp" not in record:
+                continue
+            hands = [h for h in record.get("hands", ()) if h in tcp]
+            releases = [
+                e.time for e in events if e.kind == "release" and e.object_name == name and e.time > t_grasp
+            ]
+            if not hands or not releases:
+                continue
+            last = t.shape[0] - 1
+            i, r = (int(np.clip(np.searchsorted(t, x - 1e-9), 0, last)) for x in (t_grasp, min(releases)))
+            shifts = []
+            for (
+                h
+            ) in hands:  # the bottom centre, held rigidly from the grasp goal to the release goal, lands at
+                held = np.linalg.solve(tcp[h][i], np.append(np.asarray(record["grasp"], dtype=float), 1.0))
+                shifts.append(np.asarray(record["place"], dtype=float) - (tcp[h][r] @ held)[:3])
+            shift = np.mean(shifts, axis=0)  # two hands: the same shift (they keep their grip)
+            if float(np.linalg.norm(shift)) < min_position or r <= i:
+                continue
+            weight = _ease((t - t[i]) / max(float(t[r] - t[i]), 1e-9))
+            after = t > t[r]
+            weight[after] = 1.0 - _ease((t[after] - t[r]) / ease_s)
+            for h in hands:
+                tcp[h][:, :3, 3] += weight[:, None] * shift[None, :]
+            records.append({"object": name, "time_s": float(t_grasp), "shift_m": [float(v) for v in shift]})
+    return replace(goals, tcp=tcp), records

@@ -14,15 +14,16 @@ corners included, by a grid of spheres bulging at most about 15 mm). Distances t
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
-from scipy.spatial.distance import cdist
 
 from hsi_planning.errors import RetargetError
+from hsi_retarget.candidates import CandidateCache, find_candidates
 from hsi_retarget.culling import LinkBounds
 from hsi_retarget.robots import Geom, RobotModel
 from hsi_retarget.scene_distance import SceneDistance
@@ -35,9 +36,6 @@ _BODY = GROUPS.index("body")
 SceneLayer = tuple[SceneDistance, NDArray[np.bool_]]
 EDGE_RADIUS = 0.05  #: [m] spheres along the edges of a big body box (:func:`_edge_columns`)
 EDGE_MIN_HALF = 0.1  #: [m] smallest half extent of a body box that gets edge columns
-#: [m] the pre-filter of sphere pairs keeps this much more than the activation (its distances round
-#: differently from the exact ones computed after it)
-_FILTER_TOLERANCE = 1e-9
 
 
 @dataclass(frozen=True, eq=False)
@@ -63,6 +61,13 @@ class SphereSet:
     tips: NDArray[np.bool_]
     proximal: NDArray[np.bool_]
     fixed: NDArray[np.bool_]
+
+    @functools.cached_property
+    def everyone(self) -> NDArray[np.bool_]:
+        """(S,) True: every sphere (one array per set, so that a cached choice sees the same scene layer)."""
+        mask = np.ones(self.radii.shape[0], dtype=bool)
+        mask.flags.writeable = False
+        return mask
 
     def of(self, group: str) -> I64:
         """Indices of the spheres of ``group`` (``left``, ``right`` or ``body``)."""
@@ -252,6 +257,7 @@ def collision_rows(
     max_rows: int,
     bounds: LinkBounds | None = None,
     extra: SceneLayer | None = None,
+    cache: CandidateCache | None = None,
 ) -> tuple[F64, F64, float]:
     """Linearized clearance constraints ``A dq >= lower`` for one IK step.
 
@@ -263,19 +269,21 @@ def collision_rows(
     of the pairs when ``pairs`` is ``bounds.pairs``, the very array; else all of them), and ``bounds``
     (built from the same spheres) skips the links that cannot be near the scene (same result, cheaper).
     ``extra`` = (scene, spheres (S,) that heed it): one more scene, e.g. an opened door that one hand
-    holds. Returns A (k, nv), lower (k,) and the smallest gap [m] (``inf`` without candidates).
+    holds. ``cache`` keeps the culled candidates across calls (:mod:`hsi_retarget.candidates`; same
+    result). Returns A (k, nv), lower (k,) and the smallest gap [m] (``inf`` without candidates).
     """
     links, centers = bounds.world(data, spheres) if bounds is not None else (None, spheres.world(data))
-    ia, ib, gaps, dirs = _candidates(
+    ia, ib, gaps, dirs = find_candidates(
         spheres,
         centers,
         pairs,
-        scene,
+        _layers(spheres, scene, extra),
+        spheres.groups != _BODY,  # the base stands on the floor: body spheres ignore it
         margins=margins,
         activation=activation,
         bounds=bounds,
         links=links,
-        extra=extra,
+        cache=cache,
     )
     if gaps.size == 0:
         return np.zeros((0, model.nv)), np.zeros(0), math.inf
@@ -301,82 +309,32 @@ def min_gap(
     bounds: LinkBounds | None = None,
     links: F64 | None = None,
     extra: SceneLayer | None = None,
+    cache: CandidateCache | None = None,
 ) -> float:
     """[m] smallest clearance minus its margin over the spheres (world ``centers`` (S, 3)) against the
     scene and over ``pairs`` (P, 2) (``margins`` = scene, finger tip, self [m]); ``inf`` with neither,
     or when nothing is within ``activation`` [m] beyond its margin. ``bounds`` (with ``links``, their world
-    centres (F, 3) of the same configuration, :meth:`LinkBounds.world`) culls as in :func:`collision_rows`."""
-    gaps = _candidates(
+    centres (F, 3) of the same configuration, :meth:`LinkBounds.world`) culls as in :func:`collision_rows`,
+    ``cache`` too."""
+    gaps = find_candidates(
         spheres,
         centers,
         pairs,
-        scene,
+        _layers(spheres, scene, extra),
+        spheres.groups != _BODY,
         margins=margins,
         activation=activation,
         bounds=bounds,
         links=links,
-        extra=extra,
+        cache=cache,
     )[2]
     return float(gaps.min(initial=math.inf))
 
 
-def _candidates(
-    spheres: SphereSet,
-    centers: F64,
-    pairs: I64,
-    scene: SceneDistance | None,
-    *,
-    margins: tuple[float, float, float],
-    activation: float,
-    bounds: LinkBounds | None,
-    links: F64 | None,
-    extra: SceneLayer | None = None,
-) -> tuple[I64, I64, F64, F64]:
-    """Sphere index pairs (second -1: the scene), gaps [m] and unit directions (first away from second)
-    of every candidate closer than ``activation`` beyond its margin (the scene, then ``extra``)."""
-    scene_margin, tip_margin, self_margin = margins
-    first, second, slacks, directions = [], [], [], []
-    layers = [] if scene is None else [(scene, np.ones(spheres.radii.shape[0], dtype=bool))]
-    layers += [] if extra is None else [extra]
-    allowance = spheres.radii + np.where(spheres.tips, tip_margin, scene_margin)
-    for layer, mask in layers:
-        check = np.flatnonzero(mask)
-        if links is not None and bounds is not None and np.isfinite(activation):
-            reach = activation + min(tip_margin, scene_margin)
-            check = np.flatnonzero(mask & bounds.scene_candidates(layer, links, reach))
-        grounded = spheres.groups[check] != _BODY  # the base stands on the floor: body spheres ignore it
-        dist, normal = layer.query_within(centers[check], allowance[check] + activation, grounded)
-        slack = dist - allowance[check]
-        near = np.flatnonzero(slack < activation)
-        first.append(check[near])
-        second.append(np.full(near.shape, -1))
-        slacks.append(slack[near])
-        directions.append(normal[near])
-    if pairs.shape[0]:
-        a, b = pairs[:, 0], pairs[:, 1]
-        if np.isfinite(activation) and bounds is not None and links is not None and bounds.pairs is pairs:
-            maybe = bounds.near_pairs(centers, activation + self_margin + _FILTER_TOLERANCE)
-            a, b = a[maybe], b[maybe]
-        elif np.isfinite(activation):  # every centre distance at once (C), then the pairs that may be near
-            gap = cdist(centers, centers)[a, b] - spheres.radii[a] - spheres.radii[b] - self_margin
-            maybe = gap < activation + _FILTER_TOLERANCE
-            a, b = a[maybe], b[maybe]
-        delta = centers[a] - centers[b]
-        norm = np.linalg.norm(delta, axis=1)
-        slack = norm - spheres.radii[a] - spheres.radii[b] - self_margin
-        near = np.flatnonzero(slack < activation)
-        first.append(a[near])
-        second.append(b[near])
-        slacks.append(slack[near])
-        directions.append(delta[near] / np.maximum(norm[near], 1e-9)[:, None])
-    if not slacks:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 3))
-    return (
-        np.concatenate(first).astype(np.int64),
-        np.concatenate(second).astype(np.int64),
-        np.concatenate(slacks),
-        np.concatenate(directions),
-    )
+def _layers(spheres: SphereSet, scene: SceneDistance | None, extra: SceneLayer | None) -> list[SceneLayer]:
+    """The scene (every sphere heeds it) and the ``extra`` layer, those present."""
+    layers: list[SceneLayer] = [] if scene is None else [(scene, spheres.everyone)]
+    return layers + ([] if extra is None else [extra])
 
 
 def _point_rows(

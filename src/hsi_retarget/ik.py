@@ -24,6 +24,7 @@ import pinocchio as pin
 from numpy.typing import NDArray
 
 from hsi_planning.errors import ConfigError, RetargetError
+from hsi_retarget.candidates import CandidateCache
 from hsi_retarget.collision import GROUPS, SceneLayer, collision_rows, min_gap, robot_spheres
 from hsi_retarget.culling import LinkBounds
 from hsi_retarget.humanoid_ik import SupportConfig, support_rows
@@ -62,6 +63,9 @@ class IKConfig:
     collision_gain: float = 0.5  #: [-] fraction of the gap to the margin one step may close
     max_collision_rows: int = 24  #: [-] closest pairs constrained per step
     self_collision: bool = True  #: [-] constrain left/right arm and arm/body spheres
+    #: [m] extra reach of the culled collision candidates, reused until a sphere moved half of it
+    #: (:mod:`hsi_retarget.candidates`; the same rows, cheaper); 0: culled anew at every query
+    candidate_slack: float = 0.05
 
     def __post_init__(self) -> None:
         positive = ("position_weight", "orientation_weight", "max_step", "position_tolerance")
@@ -81,6 +85,7 @@ class IKConfig:
             "tip_margin",
             "scene_margin",
             "self_margin",
+            "candidate_slack",
         ):
             if not getattr(self, name) >= 0.0:
                 raise ConfigError(f"IKConfig.{name} must be >= 0, got {getattr(self, name)}")
@@ -160,6 +165,8 @@ class IKSolver:
         self._bounds = LinkBounds(self.spheres, pairs)
         self._pairs = pairs if self._bounds.pairs is None else self._bounds.pairs  # the very array: culled
         self._layer: SceneLayer | None = None
+        slack = self.config.candidate_slack
+        self._cache = CandidateCache(slack) if slack > 0.0 else None
         self._v_max = np.array(robot.v_max)
         self._jq = np.array([robot.q_index(n) for n in robot.joint_names], dtype=np.int64)
         self._jv = np.array([robot.v_index(n) for n in robot.joint_names], dtype=np.int64)
@@ -280,6 +287,7 @@ class IKSolver:
             max_rows=cfg.max_collision_rows,
             bounds=self._bounds,
             extra=self._layer,
+            cache=self._cache,
         )
 
     # ------------------------------------------------------------------------------------ solving
@@ -376,6 +384,7 @@ class IKSolver:
             bounds=self._bounds,
             links=links,
             extra=self._layer,
+            cache=self._cache,
         )
         return gap if gap < reach else math.inf
 

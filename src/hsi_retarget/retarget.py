@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 
 from hsi_planning.errors import ConfigError, RetargetError
 from hsi_planning.trajectory import WristTrajectory
-from hsi_retarget.carry_correction import carry_frames, correct_carry
+from hsi_retarget.carry_correction import carry_frames, correct_carry, place_carries
 from hsi_retarget.finger_room import FingerRoomConfig, make_finger_room
 from hsi_retarget.grasp_depth import GraspDepthConfig, GraspWindow, grasp_windows, shape_grasps
 from hsi_retarget.grip_turn import (
@@ -90,7 +90,8 @@ class RetargetConfig:
     #: top-down grasp turns about its approach axis where the fingers have room
     #: (:mod:`hsi_retarget.finger_room`); ``None``: fully open, as planned.
     room: FingerRoomConfig | None = field(default_factory=FingerRoomConfig)
-    #: Carries re-aimed from the TCP pose reached at their grasp (:mod:`hsi_retarget.carry_correction`) [-].
+    #: Carries re-aimed from the TCP pose reached at their grasp, and onto each object's placement from a
+    #: schedule's record of it (:mod:`hsi_retarget.carry_correction`) [-].
     correct_carry: bool = True
 
     def __post_init__(self) -> None:
@@ -323,6 +324,10 @@ def retarget(
         goals, finger_room = make_finger_room(
             goals, windows, object_prims(scene), solver, part=part, config=cfg.room
         )
+    placed: list[dict[str, Any]] = []
+    carry_records = getattr(source, "info", {}).get("carries", []) if cfg.correct_carry else []
+    if carry_records:  # the planned goals may not hold each object at its release as at its grasp
+        goals, placed = place_carries(goals, motion.events, carry_records)
     t1 = time.perf_counter()
     carried = motion.events if cfg.correct_carry else ()  # re-aimed from the reached grasp poses
     qs, _, _, diag = track(goals, model, solver, cfg, part=part, events=carried)
@@ -372,6 +377,7 @@ def retarget(
         "time_scaling": timing.summary(goals.t),
         "handle_turns": handle_turns,
         "finger_room": finger_room,
+        "carry_placements": placed,
         **diag,
     }
     if np.isfinite(goals.lift).any():

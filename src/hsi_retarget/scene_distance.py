@@ -1,7 +1,7 @@
 """Signed distance from points to the scene: an Open3D ``RaycastingScene`` of the scene's world-frame
 meshes (closest point; negative when the point lies clearly behind the closest triangle, i.e. inside a
 closed mesh), with a cheap lower bound from a coarse grid filled on demand, so that points far from
-everything are not queried exactly (:meth:`SceneDistance.query_within`).
+everything need not be queried exactly (:meth:`SceneDistance.lower_bound`).
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ class SceneDistance:
     ) -> None:
         """Index ``meshes`` (name -> world-frame mesh) except those named in ``exclude`` or below them
         (``cabinet1`` also drops ``cabinet1/door1``). The meshes named in ``ground`` can be left out per
-        query (:meth:`query_within`: a robot's base stands on the floor).
+        query (:meth:`query`, :meth:`lower_bound`: a robot's base stands on the floor).
 
         Raises:
             RetargetError: nothing left to index.
@@ -57,11 +57,19 @@ class SceneDistance:
 
         return cls(scene_meshes(spec), exclude)  # type: ignore[arg-type]
 
-    def lower_bound(self, points: F64) -> F64:
+    def lower_bound(self, points: F64, grounded: NDArray[np.bool_] | None = None) -> F64:
         """(N,) [m] lower bounds of the distances of ``points`` (N, 3) [m]: the distance is 1-Lipschitz, so
         it is at least its value at the nearest node of a coarse grid (filled on demand) minus the way there.
-        Points off that grid (more than its padding beyond the meshes) get ``-inf``."""
-        return self._bound(np.asarray(points, dtype=np.float64).reshape(-1, 3), self._grid, self._scene)
+        Points off that grid (more than its padding beyond the meshes) get ``-inf``. Points where
+        ``grounded`` (N,) is False are bounded without the ground meshes (default: all with)."""
+        pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        if grounded is None or self._lifted is None:
+            return self._bound(pts, self._grid, self._scene)
+        raised = ~np.asarray(grounded, dtype=bool)
+        bound = np.empty(pts.shape[0])
+        bound[~raised] = self._bound(pts[~raised], self._grid, self._scene)
+        bound[raised] = self._bound(pts[raised], self._lifted_grid, self._lifted)  # a grid of their own
+        return bound
 
     def _bound(self, pts: F64, grid: F64, scene: o3d.t.geometry.RaycastingScene) -> F64:
         """:meth:`lower_bound` from ``grid`` (filled on demand from ``scene``)."""
@@ -79,35 +87,18 @@ class SceneDistance:
             bound[inside] = values - np.linalg.norm(pts[inside] - nodes, axis=1)
         return bound
 
-    def query_within(
-        self, points: F64, reach: F64, grounded: NDArray[np.bool_] | None = None
-    ) -> tuple[F64, F64]:
-        """:meth:`query` for the ``points`` (N, 3) [m] that may be closer than their ``reach`` (N,) [m]
-        (:meth:`lower_bound`); the others get their lower bound (>= ``reach``) and a zero gradient. Points
-        where ``grounded`` (N,) is False are measured without the ground meshes (default: all with)."""
-        pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-        grad = np.zeros((pts.shape[0], 3))
-        if grounded is not None and self._lifted is not None:
-            raised = ~np.asarray(grounded, dtype=bool)
-            dist = np.empty(pts.shape[0])
-            dist[~raised] = self._bound(pts[~raised], self._grid, self._scene)
-            dist[raised] = self._bound(pts[raised], self._lifted_grid, self._lifted)  # a grid of their own
-            near = dist < np.asarray(reach, dtype=np.float64)
-            raised &= near
-            near &= ~raised
-            if raised.any():
-                dist[raised], grad[raised] = self._exact(pts[raised], self._lifted)
-        else:
-            dist = self.lower_bound(pts)
-            near = dist < np.asarray(reach, dtype=np.float64)
-        if near.any():
-            dist[near], grad[near] = self._exact(pts[near])
-        return dist, grad
-
-    def query(self, points: F64) -> tuple[F64, F64]:
+    def query(self, points: F64, grounded: NDArray[np.bool_] | None = None) -> tuple[F64, F64]:
         """Distances (N,) [m] (negative inside a closed mesh) and unit gradients (N, 3) (the direction that
-        increases the distance) of ``points`` (N, 3) [m]."""
-        return self._exact(np.asarray(points, dtype=np.float64).reshape(-1, 3))
+        increases the distance) of ``points`` (N, 3) [m]. Points where ``grounded`` (N,) is False are
+        measured without the ground meshes (default: all with; a robot's base stands on the floor)."""
+        pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        if grounded is None or self._lifted is None:
+            return self._exact(pts)
+        raised = ~np.asarray(grounded, dtype=bool)
+        dist, grad = np.empty(pts.shape[0]), np.empty((pts.shape[0], 3))
+        dist[~raised], grad[~raised] = self._exact(pts[~raised])
+        dist[raised], grad[raised] = self._exact(pts[raised], self._lifted)
+        return dist, grad
 
     def _exact(self, pts: F64, scene: o3d.t.geometry.RaycastingScene | None = None) -> tuple[F64, F64]:
         if pts.shape[0] == 0:

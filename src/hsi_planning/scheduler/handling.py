@@ -226,7 +226,9 @@ def grasp(run: TaskRun, obj: str, hands: tuple[Hand, ...]) -> None:
     tl.planned(approaches, "reach", "reach", "grasp", obj)
     tl.hold(c.grasp_time, "grasp", {h: ("grasp", "", obj) for h in hands})
     kind = run.world.spec.object_by_name(obj).kind
-    run.shapes[obj] = pts - bottom_centre(pts, kind)
+    bottom = bottom_centre(pts, kind)
+    run.shapes[obj] = pts - bottom
+    tl.carries.append({"object": obj, "hands": list(hands), "grasp": [float(v) for v in bottom]})
     run.state = run.state.with_held(obj, True)
     for h in hands:
         tl.wrists[h].holding = obj
@@ -270,6 +272,9 @@ def place(run: TaskRun, obj: str, hands: tuple[Hand, ...], position: F64, suppor
         tl.wrists[h].carry_local = None
     run.grips.pop(obj, None)
     tl.hold(c.release_time, "release", {h: ("release", "", obj) for h in hands})
+    open_carries = [k for k in tl.carries if k["object"] == obj and "place" not in k]
+    if open_carries:
+        open_carries[-1]["place"] = [float(v) for v in position]
     base = run.world.object_position(obj, WorldState(opened=run.state.opened))
     run.state = run.state.with_held(obj, False).with_moved(obj, position - base)
     run.shapes.pop(obj, None)

@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -52,6 +53,9 @@ class Timeline:
         self.segments: list[PlannedSegment] = []
         self.steps: list[str] = []
         self.root_path: list[F64] = [hip.xy]
+        #: every free object carried, in grasp order: ``object``, ``hands``, its bottom centre at the
+        #: ``grasp`` and its ``place`` target [m] (world; lists; the schedule's ``info["carries"]``)
+        self.carries: list[dict[str, Any]] = []
         self.snapshot("start")
 
     # --------------------------------------------------------------------------------- queries
@@ -207,5 +211,5 @@ class Timeline:
             segments=tuple(self.segments),
             steps=tuple(self.steps),
             root_path=np.array(self.root_path),
-            info=dict(info),
+            info={**info, "carries": [dict(c) for c in self.carries]} if self.carries else dict(info),
         )
