@@ -211,6 +211,29 @@ def test_humanoid_side_grasp_with_the_forearm_about_neutral(robots: dict[str, Ro
         assert abs(result.q[robot.q_index(f"{side}_wrist_yaw")]) < 0.2  # of +-1.4 rad
 
 
+def test_footsteps_shift_the_weight_and_crouch_smoothly(robots: dict[str, RobotModel]) -> None:
+    from hsi_retarget.humanoid_ik import _swing, plan_footsteps
+
+    robot, cfg = robots["humanoid"], SupportConfig()
+    t = np.arange(0.0, 6.0, 1.0 / 60.0)
+    pelvis = np.tile(np.eye(4), (t.shape[0], 1, 1))
+    pelvis[:, 2, 3] = robot.q_home[2]
+    pelvis[:, 0, 3] = np.clip(t - 0.5, 0.0, 0.6)  # the pelvis goal walks 60 cm forward
+    steps = plan_footsteps(robot, t, pelvis, cfg)
+    assert len(steps.steps) >= 4  # two step pairs at least (25 cm steps)
+    xy = np.where(np.isfinite(steps.com), steps.com, pelvis[:, :2, 3])  # the pelvis xy goal the IK gets
+    speed = np.linalg.norm(np.diff(xy, axis=0), axis=1) * 60.0
+    assert speed.max() < 3.0, speed.max()  # [m/s]: no jump between the feet or back under the pelvis
+    assert np.abs(np.diff(steps.crouch)).max() * 60.0 < 0.5  # [m/s]: the pelvis lowers and rises gently
+    assert steps.crouch[-1] == 0.0 and np.isnan(steps.com[-1]).all()  # upright and free after the steps
+    for j, sides in enumerate(steps.support):  # on one foot the weight is over it
+        if len(sides) == 1:
+            np.testing.assert_allclose(steps.com[j], steps.feet[sides[0]][j][:2, 3], atol=1e-9)
+    u = 0.99999999  # the min-jerk polynomial rounds past 1 here: a swing's slerp must not see that
+    assert 10 * u**3 - 15 * u**4 + 6 * u**5 > 1.0
+    np.testing.assert_allclose(_swing(np.eye(4), np.eye(4), u, 0.05), np.eye(4), atol=1e-6)
+
+
 def test_support_polygon_is_the_hull_of_both_soles(robots: dict[str, RobotModel]) -> None:
     robot = robots["humanoid"]
     cfg = SupportConfig(com_margin=0.0)

@@ -503,7 +503,7 @@ def test_a_carry_is_moved_to_put_the_object_on_its_placement(dual: RobotModel) -
         scale=1.0,
     )
     events = (ContactEvent(1.0, "left", "grasp", "can1"), ContactEvent(3.0, "left", "release", "can1"))
-    place = bottom + [0.3, 0.0, 0.0]  # where the planner meant it: the turn was not accounted for
+    place = bottom + np.array([0.3, 0.0, 0.0])  # where the planner meant it: the turn was not accounted for
     carries = [{"object": "can1", "hands": ["left"], "grasp": bottom.tolist(), "place": place.tolist()}]
     moved, records = place_carries(goals, events, carries, ease_s=0.5)
     out = moved.tcp["left"]
@@ -517,7 +517,8 @@ def test_a_carry_is_moved_to_put_the_object_on_its_placement(dual: RobotModel) -
     np.testing.assert_allclose(out[t > 3.5 + 1e-9], tcp[t > 3.5 + 1e-9], atol=1e-12)  # eased out after
     shift = out[:, :3, 3] - tcp[:, :3, 3]
     assert np.all(np.diff(np.linalg.norm(shift[i : r + 1], axis=1)) >= -1e-12)  # eased in along the carry
-    assert len(records) == 1 and np.linalg.norm(records[0]["shift_m"]) == pytest.approx(2 * np.hypot(0.03, 0.02))
+    assert len(records) == 1
+    assert np.linalg.norm(records[0]["shift_m"]) == pytest.approx(2 * np.hypot(0.03, 0.02))
     same, none = place_carries(goals, events, [{**carries[0], "place": (tcp[r] @ before)[:3].tolist()}])
     assert none == [] and np.array_equal(same.tcp["left"], tcp)  # consistent already: nothing to do
     assert place_carries(goals, events, [{"object": "can1", "hands": ["left"], "grasp": [0, 0, 0]}])[1] == []

@@ -264,6 +264,28 @@ def test_pick_lifts_by_weld_on_contact_and_release_places(world: SimWorld) -> No
     assert report.collisions == 0 and report.max_tracking_error_m < 0.01
 
 
+def test_a_hand_may_touch_its_target_on_the_approach_and_until_it_has_let_go(world: SimWorld) -> None:
+    from hsi_retarget.sim_check.grasp import GraspConfig, GraspController
+
+    grasp = GraspController(world, GraspConfig(approach_s=1.0, release_grace_s=0.5))
+    grasp.expect(
+        (ContactEvent(2.0, "left", "grasp", "can1"), ContactEvent(4.0, "left", "release", "can1")), 1.0
+    )
+    assert grasp.allowed(0, 1.5) == set() and grasp.allowed(0, 2.1) == {"can1"}  # the grasp is at 3 s
+    assert grasp.allowed(1, 2.1) == set()  # the other hand approaches nothing
+    grasp.command(ContactEvent(2.0, "left", "grasp", "can1"), 3.0)
+    assert grasp.allowed(0, 3.2) == {"can1"}  # closing on it
+    touching = world.tcp_position("left") + np.array([-0.03, 0.0, -0.05])  # against the palm
+    world.move_object("can1", touching - world.object_pose("can1")[:3])
+    grasp._weld("left", "can1")
+    grasp.command(ContactEvent(4.0, "left", "release", "can1"), 5.0)
+    grasp.update(5.6)  # past the grace, still touching it: still allowed
+    assert grasp._hand_touches("left", "can1") and grasp.allowed(0, 5.6) == {"can1"}
+    world.move_object("can1", np.array([0.0, 0.0, 0.5]))  # let go of
+    grasp.update(5.7)
+    assert not grasp._hand_touches("left", "can1") and grasp.allowed(0, 5.7) == set()
+
+
 def test_the_fingers_stop_on_the_object_when_the_weld_is_made(world: SimWorld) -> None:
     """A force-limited gripper: once welded, the finger targets stay where the fingers met the can (they
     do not squeeze on to the closed stop against the weld), and the held can stays upright."""

@@ -168,14 +168,17 @@ def plan_footsteps(robot: RobotModel, t: F64, pelvis: F64, config: SupportConfig
         end = int(np.searchsorted(t, t[i] + 2 * (cfg.shift_time + cfg.swing_time)))
         goal = _stance(robot, pelvis[min(end, n - 1)])
         t0 = start = float(t[i])
+        shift_from = pelvis[i][:2, 3]  # the weight moves smoothly from here to each stance foot in turn
         for swing in sorted(current, key=lambda s: -disp[s]):
             stance = "right" if swing == "left" else "left"
             target = _limit_step(current[swing], goal[swing], cfg.max_step_length)
             t_shift, t_end = t0 + cfg.shift_time, t0 + cfg.shift_time + cfg.swing_time
+            over = current[stance][:2, 3]
             j = i
             while j < n and t[j] < t_end:
-                com[j] = current[stance][:2, 3]
-                crouch[j] = cfg.step_crouch * min(1.0, (t[j] - start) / cfg.shift_time)
+                w = _ease((t[j] - t0) / cfg.shift_time)
+                com[j] = (1.0 - w) * shift_from + w * over
+                crouch[j] = cfg.step_crouch * _ease((t[j] - start) / cfg.shift_time)
                 feet[stance][j] = current[stance]
                 if t[j] < t_shift:
                     feet[swing][j], support[j] = current[swing], ("left", "right")
@@ -193,10 +196,23 @@ def plan_footsteps(robot: RobotModel, t: F64, pelvis: F64, config: SupportConfig
                 }
             )
             current = {**current, swing: target}
-            i, t0 = j, t_end
+            i, t0, shift_from = j, t_end, over
             if i >= n:
                 break
+        while i < n and t[i] < t0 + cfg.shift_time:  # both feet down: back under the pelvis goal, upright
+            w = _ease((t[i] - t0) / cfg.shift_time)
+            com[i] = (1.0 - w) * shift_from + w * pelvis[i][:2, 3]
+            crouch[i] = cfg.step_crouch * (1.0 - w)
+            for s, track in feet.items():
+                track[i] = current[s]
+            i += 1
     return Footsteps(feet, tuple(support), com, crouch, steps)
+
+
+def _ease(u: float) -> float:
+    """Min-jerk ease from 0 to 1 over ``u`` in [0, 1] (clipped; the result too: it rounds past 1)."""
+    u = min(max(float(u), 0.0), 1.0)
+    return min(max(10 * u**3 - 15 * u**4 + 6 * u**5, 0.0), 1.0)
 
 
 def _yaw(pose: F64) -> float:
@@ -214,7 +230,7 @@ def _limit_step(start: F64, goal: F64, max_length: float) -> F64:
 
 def _swing(start: F64, goal: F64, u: float, height: float) -> F64:
     """Sole pose (4, 4) at phase ``u`` in [0, 1] of a min-jerk swing with an arc of apex ``height`` [m]."""
-    s = float(np.clip(10 * u**3 - 15 * u**4 + 6 * u**5, 0.0, 1.0))
+    s = _ease(u)
     out = np.eye(4)
     rots = Rotation.from_matrix(np.stack([start[:3, :3], goal[:3, :3]]))
     out[:3, :3] = Slerp([0.0, 1.0], rots)(s).as_matrix()

@@ -93,6 +93,7 @@ class _Run:
     def _switch(self, trajectory: JointTrajectory, t: float) -> None:
         check_trajectory(self.world, trajectory)
         self.active, self.t_active, self.events = trajectory, t, list(trajectory.events)
+        self.grasp.expect(trajectory.events, t)
         vel = trajectory.velocities()
         robot = self.world.robot
         for name, iq in zip(self.limits.names, self.limits.q_idx.tolist(), strict=True):

@@ -9,6 +9,11 @@ gripper's speed limit) and makes the grasp *pending*; while pending, the weld is
 - the TCP is within ``tcp_distance_m`` of the target's surface (inside counts) while the fingers close and
   one finger already touches it, or the fingers have reached the closed stop (a thin or small target).
 
+A hand may touch its target without that counting as a collision (:meth:`GraspController.allowed`; as
+MoveIt allows gripper-object contacts on a pick's approach and retreat): from ``approach_s`` before the
+grasp event, while it closes and holds, and after the release until it has let go of it (at least
+``release_grace_s``).
+
 On activation the weld's relative pose is set to the current gripper-to-target pose, so the target keeps
 where it is in the hand (no jump), and with ``stop_fingers`` the finger targets stop where the fingers are
 (a force-limited gripper does not squeeze on against the weld). A ``release`` event deactivates the weld
@@ -37,13 +42,17 @@ class GraspConfig:
 
     tcp_distance_m: float = 0.004  #: TCP-to-target surface distance that counts as touching [m]
     timeout_s: float = 1.5  #: a pending grasp fails after this time without contact [s]
-    release_grace_s: float = 0.5  #: hand-target contacts stay allowed this long after a release [s]
+    #: hand-target contacts are allowed this long before the hand's grasp event (its approach) [s]
+    approach_s: float = 1.0
+    #: hand-target contacts stay allowed this long after a release, and on while the hand stays in touch
+    #: (its retreat) [s]
+    release_grace_s: float = 0.5
     #: the fingers stop where they are when the weld is made (a force-limited gripper), instead of
     #: squeezing on to the closed stop against the weld [-]
     stop_fingers: bool = True
 
     def __post_init__(self) -> None:
-        for name in ("tcp_distance_m", "timeout_s", "release_grace_s"):
+        for name in ("tcp_distance_m", "timeout_s", "approach_s", "release_grace_s"):
             value = getattr(self, name)
             if not (value >= 0.0 and math.isfinite(value)):
                 raise ConfigError(f"GraspConfig.{name} must be finite and >= 0, got {value}")
@@ -75,6 +84,7 @@ class GraspController:
         self.held: dict[str, str] = {}  #: hand -> welded body
         self.pending: dict[str, tuple[str, float]] = {}  #: hand -> (target, event time [s])
         self.released: dict[str, tuple[str, float]] = {}  #: hand -> (target, release time [s])
+        self.expected: list[tuple[float, str, str]] = []  #: upcoming grasps: (time [s], hand, target)
         self.records: list[GraspRecord] = []
         self._target_geoms: dict[str, np.ndarray] = {}
         for (hand, target), eq in world.welds.items():  # welds left on by a previous execution: still held
@@ -134,20 +144,33 @@ class GraspController:
             self.released[hand] = (target, time)
             self.records.append(GraspRecord(time, hand, target, "release"))
 
+    def expect(self, events: list[ContactEvent] | tuple[ContactEvent, ...], start: float) -> None:
+        """The grasps of a trajectory starting at simulated time ``start`` [s] (event times relative to it):
+        each hand may touch its next target during its approach (:attr:`GraspConfig.approach_s`)."""
+        self.expected = [(start + e.time, e.hand, e.object_name) for e in events if e.kind == "grasp"]
+
     def allowed(self, hand: int, time: float) -> set[str]:
-        """Bodies hand ``hand`` (0 left, 1 right) may touch: its held, pending or just released target."""
+        """Bodies hand ``hand`` (0 left, 1 right) may touch: its held or pending target, the target it is
+        approaching (:attr:`GraspConfig.approach_s` before its grasp event) and the one it has just
+        released (:attr:`GraspConfig.release_grace_s`, or on while it stays in touch: :meth:`update`)."""
         name = HANDS[hand]
         out = set()
         if name in self.held:
             out.add(self.held[name])
         if name in self.pending:
             out.add(self.pending[name][0])
-        if name in self.released and time - self.released[name][1] <= self.config.release_grace_s:
+        if name in self.released:
             out.add(self.released[name][0])
+        soon = time + self.config.approach_s
+        out.update(target for at, h, target in self.expected if h == name and time - 1e-9 <= at <= soon)
         return out
 
     def update(self, time: float) -> None:
-        """Weld pending grasps whose target is touched; fail those past the timeout. Needs fresh contacts."""
+        """Weld pending grasps whose target is touched; fail those past the timeout; end a release's
+        allowance once past its grace the hand no longer touches what it let go of. Needs fresh contacts."""
+        for hand, (target, since) in list(self.released.items()):
+            if time - since > self.config.release_grace_s and not self._hand_touches(hand, target):
+                del self.released[hand]
         for hand, (target, since) in list(self.pending.items()):
             how = self._touch(hand, target)
             if how:
@@ -191,6 +214,16 @@ class GraspController:
             if mujoco.mj_geomDistance(w.model, d, probe, int(g), limit + 0.01, None) <= limit:
                 return "proximity"
         return ""
+
+    def _hand_touches(self, hand: str, target: str) -> bool:
+        """Any geom of ``hand`` in contact with ``target``."""
+        w, d = self.world, self.world.data
+        if not d.ncon:
+            return False
+        pairs = np.asarray(d.contact.geom[: d.ncon])
+        own = w.geom_hand[pairs] == HANDS.index(hand)
+        theirs = np.isin(pairs, self._geoms(target))
+        return bool(((own[:, 0] & theirs[:, 1]) | (own[:, 1] & theirs[:, 0])).any())
 
     def _weld(self, hand: str, target: str) -> None:
         w = self.world

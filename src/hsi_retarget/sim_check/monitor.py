@@ -2,7 +2,8 @@
 
 A *collision* is a contact between a robot geom and a furniture geom (floor, furniture, doors, drawers) or
 between geoms of the two arms, penetrating deeper than ``depth_m``. Allowed: a hand touching the body it
-holds, is closing on, or has just released (see :meth:`GraspController.allowed`), and support geoms
+approaches to grasp, closes on, holds, or has just released (see :meth:`GraspController.allowed`), and
+support geoms
 (humanoid soles) on the floor. Contacts with free objects are never collisions.
 """
 
