@@ -133,13 +133,21 @@ def test_collision_margin_to_a_wall_in_front_of_the_arm(robots: dict[str, RobotM
     clearance = dist - walled.spheres.radii
     tips = walled.spheres.tips
     body = clearance[~tips]
+    far = config.tip_margin_far  # no contact here: the fingers keep the wider margin
     assert body.min() >= config.scene_margin - 2e-3, body.min()
-    assert clearance[tips].min() >= config.tip_margin - 2e-3, clearance[tips].min()
+    assert clearance[tips].min() >= far - 2e-3, clearance[tips].min()
     # it pressed up to the margin (the fingers or the gripper body stop it)
-    assert min(body.min() - config.scene_margin, clearance[tips].min() - config.tip_margin) < 0.005
+    assert min(body.min() - config.scene_margin, clearance[tips].min() - far) < 0.005
     tcp_x = robot.frame_pose(result.q, "right_tcp")[0, 3]
-    assert tcp_x < wall_x - config.tip_margin
+    assert tcp_x < wall_x - far
     assert result.position_error["right"] > 0.25
+    # at a contact the fingers may close in to tip_margin (the goal behind the wall pulls them there)
+    closing = IKTargets(tcp={"right": goal}, root=np.eye(4), lift=0.225, contact={"right": 1.0})
+    near = walled.solve(robot.q_home, closing, iterations=150)
+    tip_gap = (scene.query(walled.sphere_centers(near.q))[0] - walled.spheres.radii)[tips].min()
+    assert config.tip_margin - 2e-3 <= tip_gap < far - 3e-3, tip_gap
+    with pytest.raises(ConfigError, match="tip_margin_far"):
+        IKConfig(tip_margin=0.01, tip_margin_far=0.005)
 
 
 def test_arms_keep_the_self_margin_when_their_goals_cross(robots: dict[str, RobotModel]) -> None:
@@ -279,6 +287,34 @@ def test_spheres_cover_the_arms_gripper_and_finger_tips(robots: dict[str, RobotM
         assert np.all(spheres.radii > 0.0)
 
 
+def test_finger_boxes_stick_out_of_their_spheres_by_at_most_the_allowance(
+    robots: dict[str, RobotModel],
+) -> None:
+    from hsi_retarget.collision import FINGER_UNCOVERED
+
+    rng = np.random.default_rng(2)
+    for robot in robots.values():
+        spheres = robot_spheres(robot)
+        for link in robot.description.links:
+            own = [i for i, f in enumerate(spheres.frames) if f == link.name]
+            boxes = [g for g in link.geoms if g.kind == "box"]
+            if not (own and boxes and spheres.tips[own[0]]):
+                continue
+            for geom in boxes:  # points on the box's faces: outside the spheres by at most the allowance
+                half, pose = np.asarray(geom.size), np.asarray(geom.pose)
+                u = rng.uniform(-1.0, 1.0, (5000, 3))
+                face = rng.integers(0, 3, 5000)
+                u[np.arange(5000), face] = np.sign(u[np.arange(5000), face])
+                pts = (pose[:3, :3] @ (u * half).T).T + pose[:3, 3]
+                gap = np.linalg.norm(pts[:, None] - spheres.centers[own][None], axis=2) - spheres.radii[own]
+                assert gap.min(axis=1).max() <= FINGER_UNCOVERED + 1e-6, (robot.name, geom.name)
+                # and the finger stays thin: the spheres bulge past its thin faces by a few mm only
+                thin = int(np.argmin(half))
+                local = (spheres.centers[own] - pose[:3, 3]) @ pose[:3, :3]
+                bulge = np.abs(local[:, thin]) + spheres.radii[own] - half[thin]
+                assert bulge.max() < 0.004, (robot.name, geom.name, bulge.max())
+
+
 def test_bad_config_is_rejected() -> None:
     with pytest.raises(ConfigError, match="collision_gain"):
         IKConfig(collision_gain=0.0)
@@ -304,20 +340,25 @@ def test_scene_distance_is_signed_and_robust_next_to_edges() -> None:
 
 def test_a_hand_at_a_contact_wins_over_the_base_goal(robots: dict[str, RobotModel]) -> None:
     """Contact weights: with the base held at its goal, a TCP goal out of reach is closed further when the
-    hand is at a contact; invalid factors are rejected."""
+    hand is at a contact, and further still when it holds a handle; invalid factors are rejected."""
     robot = robots["dual_ur5e"]
     solver = IKSolver(robot, IKConfig(self_collision=False))
     goal = robot.frame_pose(robot.q_home, robot.tcp_frames["right"])
     goal[:3, 3] += [0.45, -0.1, -0.35]  # farther than the arm reaches with the base at its goal
     root = np.eye(4)
     errors = []
-    for contact in (0.0, 1.0):
-        targets = IKTargets(tcp={"right": goal}, root=root, contact={"right": contact} if contact else {})
+    for contact, holding in ((0.0, ()), (1.0, ()), (1.0, ("right",))):
+        targets = IKTargets(
+            tcp={"right": goal}, root=root, contact={"right": contact} if contact else {}, holding=holding
+        )
         result = solver.solve(np.array(robot.q_home), targets, 150)
         errors.append(result.position_error["right"])
     assert errors[1] < 0.5 * errors[0] and errors[0] > 0.01
+    assert errors[2] < 0.5 * errors[1]  # a hand holding a door's or drawer's handle wins more
     with pytest.raises(ConfigError):
         IKConfig(contact_position_factor=0.5)
+    with pytest.raises(ConfigError, match="hold_factor"):
+        IKConfig(hold_factor=0.5)
 
 
 def test_the_base_turns_the_long_way_round_when_the_short_way_ends_past_its_yaw_limit(

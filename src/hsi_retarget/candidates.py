@@ -94,34 +94,39 @@ def find_candidates(
     bounds: LinkBounds | None,
     links: F64 | None,
     cache: CandidateCache | None = None,
+    extra_margin: F64 | None = None,
 ) -> tuple[I64, I64, F64, F64]:
     """Sphere index pairs (second -1: a scene layer), gaps [m] and unit directions (first away from second)
     of every candidate closer than ``activation`` [m] beyond its margin (``margins`` = scene, finger tip,
     self [m]): spheres (world ``centers`` (S, 3) [m]) against each of ``layers`` in turn (``grounded`` (S,):
     measured with the ground meshes), then the ``pairs`` (P, 2). With ``bounds`` and ``links`` (their world
     centres (F, 3) at the same configuration) and a finite ``activation`` the candidates are culled first
-    (from ``cache`` when it still holds)."""
+    (from ``cache`` when it still holds). ``extra_margin`` (S,) [m], >= 0: more scene margin per sphere."""
     scene_margin, tip_margin, self_margin = margins
-    allowance = spheres.radii + np.where(spheres.tips, tip_margin, scene_margin)
+    base = spheres.radii + np.where(spheres.tips, tip_margin, scene_margin)
+    allowance, need = base, activation  # culled for the largest extra margin as more reach: a superset
+    if extra_margin is not None:
+        allowance = base + extra_margin
+        need += float(extra_margin.max(initial=0.0))
     picks: _Picks | None = None
     if bounds is not None and links is not None and np.isfinite(activation):
         extra = 0.0 if cache is None else cache.slack
         key: tuple[object, ...] = (pairs, *(x for layer in layers for x in layer), *map(float, margins))
-        picks = None if cache is None else cache._lookup(key, centers, activation)
+        picks = None if cache is None else cache._lookup(key, centers, need)
         if picks is None:
-            within = (margins, activation + extra)
+            within = (margins, need + extra)
             picks = _cull(
                 centers,
                 pairs,
                 layers,
                 grounded=grounded,
-                allowance=allowance,
+                allowance=base,
                 within=within,
                 bounds=bounds,
                 links=links,
             )
             if cache is not None:
-                cache._store(key, centers, activation, picks)
+                cache._store(key, centers, need, picks)
                 cache.misses += 1
         elif cache is not None:
             cache.hits += 1

@@ -6,9 +6,10 @@ against the body they hang from) and every link from the elbow joint's link outw
 gripper body, and the fingers as *tip* spheres, which get a smaller scene margin since they must get close
 to what they grasp), and for the body the links that carry the arms (torso, pelvis/base) with their fixed
 children (head). A capsule/cylinder becomes spheres of its radius along its axis, a box spheres of its
-smallest half extent over its two larger axes (a finger box: spheres of its middle half extent along its
-longest axis; the box of a gripper's palm, which comes close to the other arm, is covered completely,
-corners included, by a grid of spheres bulging at most about 15 mm). Distances to the scene come from
+smallest half extent over its two larger axes (a finger box: columns of spheres along its longest axis,
+each through its part of the cross-section's corners, close enough that it sticks out at most 1.5 mm;
+the box of a gripper's palm, which comes close to the other arm, is covered completely, corners included,
+by a grid of spheres bulging at most about 15 mm). Distances to the scene come from
 :class:`~hsi_retarget.scene_distance.SceneDistance`.
 """
 
@@ -36,6 +37,7 @@ _BODY = GROUPS.index("body")
 SceneLayer = tuple[SceneDistance, NDArray[np.bool_]]
 EDGE_RADIUS = 0.05  #: [m] spheres along the edges of a big body box (:func:`_edge_columns`)
 EDGE_MIN_HALF = 0.1  #: [m] smallest half extent of a body box that gets edge columns
+FINGER_UNCOVERED = 0.0015  #: [m] most a finger box sticks out of its spheres (well inside the tip margin)
 
 
 @dataclass(frozen=True, eq=False)
@@ -109,6 +111,26 @@ def _covering_grid(pose: F64, half_ext: F64, max_per_axis: int) -> list[tuple[F6
     ]
 
 
+def _finger_column(pose: F64, half_ext: F64) -> list[tuple[F64, float]]:
+    """Spheres in columns along a finger box's longest axis, as many side by side as make each column's
+    cross-section about square (a thin finger stays thin), each sphere through the corners of its column's
+    cross-section and as close along the axis as leaves no point of the box more than
+    :data:`FINGER_UNCOVERED` outside them (the ends stick out ``radius - spacing / 2``)."""
+    order = np.argsort(half_ext)
+    thin, wide, half = (float(half_ext[k]) for k in order)
+    columns = max(1, math.ceil(wide / thin - 1e-9))
+    part = wide / columns  # half width of one column
+    corner = float(np.hypot(part, thin))
+    reach = math.sqrt((corner + FINGER_UNCOVERED) ** 2 - corner**2)  # covered this far either side
+    n = max(1, math.ceil((2.0 * half - 2.0 * reach) / (2.0 * reach)) + 1)
+    along = np.linspace(-(half - reach), half - reach, n) if n > 1 else np.zeros(1)
+    across = np.linspace(-(wide - part), wide - part, columns) if columns > 1 else np.zeros(1)
+    ax_along, ax_across = np.eye(3)[order[2]], np.eye(3)[order[1]]
+    return [
+        (pose[:3, :3] @ (u * ax_along + v * ax_across) + pose[:3, 3], corner) for u in along for v in across
+    ]
+
+
 def _edge_columns(pose: F64, half_ext: F64) -> list[tuple[F64, float]]:
     """Columns of :data:`EDGE_RADIUS` spheres along the four edges parallel to the smallest axis of a big
     box (smallest half extent >= :data:`EDGE_MIN_HALF`; e.g. a mobile base's chassis), whose spheres of the
@@ -141,13 +163,7 @@ def _geom_spheres(
     if palm and geom.kind == "box":
         return _covering_grid(pose, np.asarray(geom.size, dtype=np.float64), max_per_axis)
     if finger and geom.kind == "box":
-        half_ext = np.asarray(geom.size, dtype=np.float64)
-        order = np.argsort(half_ext)
-        radius, half = float(half_ext[order[1]]), float(half_ext[order[2]])
-        n = min(max_per_axis, max(1, math.ceil(half / radius)))
-        axis = np.eye(3)[order[2]]
-        spots = np.linspace(-(half - radius), half - radius, n) if n > 1 else np.zeros(1)
-        return [(pose[:3, :3] @ (u * axis) + pose[:3, 3], radius) for u in spots]
+        return _finger_column(pose, np.asarray(geom.size, dtype=np.float64))
     if geom.kind == "sphere":
         return [(pose[:3, 3].copy(), float(geom.size[0]))]
     if geom.kind in ("capsule", "cylinder"):
@@ -258,6 +274,7 @@ def collision_rows(
     bounds: LinkBounds | None = None,
     extra: SceneLayer | None = None,
     cache: CandidateCache | None = None,
+    extra_margin: F64 | None = None,
 ) -> tuple[F64, F64, float]:
     """Linearized clearance constraints ``A dq >= lower`` for one IK step.
 
@@ -270,7 +287,8 @@ def collision_rows(
     (built from the same spheres) skips the links that cannot be near the scene (same result, cheaper).
     ``extra`` = (scene, spheres (S,) that heed it): one more scene, e.g. an opened door that one hand
     holds. ``cache`` keeps the culled candidates across calls (:mod:`hsi_retarget.candidates`; same
-    result). Returns A (k, nv), lower (k,) and the smallest gap [m] (``inf`` without candidates).
+    result). ``extra_margin`` (S,) [m], >= 0: more scene margin per sphere. Returns A (k, nv), lower (k,)
+    and the smallest gap [m] (``inf`` without candidates).
     """
     links, centers = bounds.world(data, spheres) if bounds is not None else (None, spheres.world(data))
     ia, ib, gaps, dirs = find_candidates(
@@ -284,6 +302,7 @@ def collision_rows(
         bounds=bounds,
         links=links,
         cache=cache,
+        extra_margin=extra_margin,
     )
     if gaps.size == 0:
         return np.zeros((0, model.nv)), np.zeros(0), math.inf

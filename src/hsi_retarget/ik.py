@@ -51,13 +51,19 @@ class IKConfig:
     contact_position_factor: float = 10.0
     contact_orientation_factor: float = 30.0
     contact_root_factor: float = 1.5  #: [-] root goal weight factor there (the base follows less)
+    #: [-] TCP weight factor (on top of the contact factors) of a hand holding an opened door's or drawer's
+    #: handle (:attr:`IKTargets.holding`): the part follows that hand, a near-closed chain
+    hold_factor: float = 10.0
     damping: float = 1e-4  #: [1/rad^2] Levenberg-Marquardt damping of every step
     max_step: float = 0.05  #: [rad] or [m] largest change of one joint in one step (trust region)
     iterations: int = 200  #: [-] step limit of :meth:`IKSolver.solve`
     position_tolerance: float = 1e-4  #: [m] convergence of :meth:`IKSolver.solve`
     orientation_tolerance: float = 1e-3  #: [rad] convergence of :meth:`IKSolver.solve`
     scene_margin: float = 0.02  #: [m] clearance kept between robot spheres and the scene
-    tip_margin: float = 0.005  #: [m] clearance kept between finger spheres and the scene
+    tip_margin: float = 0.005  #: [m] clearance kept between finger spheres and the scene at a contact
+    #: [m] that clearance away from contacts (:attr:`IKTargets.contact` 0; linear in between): the fingers
+    #: pass furniture edges with room for the execution's tracking error, and close in only at a grasp
+    tip_margin_far: float = 0.015
     self_margin: float = 0.015  #: [m] clearance kept between the arms and between an arm and the body
     activation_distance: float = 0.15  #: [m] beyond the margin: farther pairs get no constraint row
     collision_gain: float = 0.5  #: [-] fraction of the gap to the margin one step may close
@@ -69,10 +75,15 @@ class IKConfig:
 
     def __post_init__(self) -> None:
         positive = ("position_weight", "orientation_weight", "max_step", "position_tolerance")
-        factors = (self.contact_position_factor, self.contact_orientation_factor, self.contact_root_factor)
+        factors = (
+            self.contact_position_factor,
+            self.contact_orientation_factor,
+            self.contact_root_factor,
+            self.hold_factor,
+        )
         if not all(f >= 1.0 for f in factors):
             raise ConfigError(
-                f"IKConfig.contact_*_factor (position, orientation, root) must be >= 1: {factors}"
+                f"IKConfig.contact_*_factor (position, orientation, root), hold_factor: >= 1, got {factors}"
             )
         for name in (*positive, "orientation_tolerance", "activation_distance"):
             if not getattr(self, name) > 0.0:
@@ -83,6 +94,7 @@ class IKConfig:
             "posture_weight",
             "damping",
             "tip_margin",
+            "tip_margin_far",
             "scene_margin",
             "self_margin",
             "candidate_slack",
@@ -91,6 +103,11 @@ class IKConfig:
                 raise ConfigError(f"IKConfig.{name} must be >= 0, got {getattr(self, name)}")
         if not 0.0 < self.collision_gain <= 1.0:
             raise ConfigError(f"IKConfig.collision_gain must be in (0, 1], got {self.collision_gain}")
+        if self.tip_margin_far < self.tip_margin:
+            raise ConfigError(
+                f"IKConfig.tip_margin_far [m] must be >= tip_margin {self.tip_margin}, "
+                f"got {self.tip_margin_far}"
+            )
         if self.iterations < 1 or self.max_collision_rows < 0:
             raise ConfigError("IKConfig.iterations must be >= 1 and max_collision_rows >= 0")
 
@@ -108,6 +125,7 @@ class IKTargets:
         com: (2,) [m] soft CoM goal (humanoid weight shift), ``None``: none.
         posture: (nq,) posture configuration; ``None``: the robot's home.
         contact: side -> [0..1] closeness of its TCP goal to a contact (scales its task weights up).
+        holding: sides holding an opened door's or drawer's handle (their TCP weights scaled up more).
     """
 
     tcp: dict[str, F64] = field(default_factory=dict)
@@ -118,6 +136,7 @@ class IKTargets:
     com: F64 | None = None
     posture: F64 | None = None
     contact: dict[str, float] = field(default_factory=dict)
+    holding: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -165,6 +184,11 @@ class IKSolver:
         self._bounds = LinkBounds(self.spheres, pairs)
         self._pairs = pairs if self._bounds.pairs is None else self._bounds.pairs  # the very array: culled
         self._layer: SceneLayer | None = None
+        #: finger spheres of each hand
+        self._tips = {
+            s: np.flatnonzero(self.spheres.tips & (self.spheres.groups == GROUPS.index(s)))
+            for s in ("left", "right")
+        }
         slack = self.config.candidate_slack
         self._cache = CandidateCache(slack) if slack > 0.0 else None
         self._v_max = np.array(robot.v_max)
@@ -222,6 +246,8 @@ class IKSolver:
             if c > 0.0:
                 gain = np.repeat([cfg.contact_position_factor, cfg.contact_orientation_factor], 3)
                 w = w_tcp * (1.0 + c * (gain - 1.0))
+            if side in targets.holding:
+                w = w * cfg.hold_factor
             add(self._frame_jacobian(fid), self._pose_error(fid, goal), w)
         near = max(targets.contact.values(), default=0.0)  # the base moves less for a hand at a contact
         root_weight = cfg.root_weight * (1.0 + near * (cfg.contact_root_factor - 1.0))
@@ -272,8 +298,21 @@ class IKSolver:
             heed &= self.spheres.groups != GROUPS.index(holder)
         self._layer = (scene, heed)
 
-    def _collision_rows(self, q: F64) -> tuple[F64, F64, float]:
-        """Rows A (k, nv) and lower bounds (k,) of the closest sphere pairs; smallest clearance - margin."""
+    def _tip_extra(self, targets: IKTargets) -> F64 | None:
+        """(S,) [m] finger margins beyond :attr:`IKConfig.tip_margin` for ``targets``' contact closeness
+        (``None``: none)."""
+        cfg = self.config
+        span = cfg.tip_margin_far - cfg.tip_margin
+        if span <= 0.0:
+            return None
+        extra = np.zeros(self.spheres.radii.shape[0])
+        for side, tips in self._tips.items():
+            extra[tips] = span * (1.0 - targets.contact.get(side, 0.0))
+        return extra
+
+    def _collision_rows(self, q: F64, extra: F64 | None = None) -> tuple[F64, F64, float]:
+        """Rows A (k, nv) and lower bounds (k,) of the closest sphere pairs; smallest clearance - margin
+        (``extra`` (S,) [m]: more scene margin per sphere)."""
         cfg = self.config
         return collision_rows(
             self._model,
@@ -288,6 +327,7 @@ class IKSolver:
             bounds=self._bounds,
             extra=self._layer,
             cache=self._cache,
+            extra_margin=extra,
         )
 
     # ------------------------------------------------------------------------------------ solving
@@ -313,7 +353,7 @@ class IKSolver:
         lower[idx_v] = np.maximum(lower[idx_v], lo_q - q[idx_q])
         upper[idx_v] = np.minimum(upper[idx_v], hi_q - q[idx_q])
         upper = np.maximum(upper, lower)
-        rows, row_lo, min_slack = self._collision_rows(q)
+        rows, row_lo, min_slack = self._collision_rows(q, self._tip_extra(targets))
         row_hi = np.full(row_lo.shape, np.inf)
         if robot.floating and targets.feet:
             eq_a, eq_b, in_a, in_lo, h_add, g_add = support_rows(

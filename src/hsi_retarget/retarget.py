@@ -228,6 +228,7 @@ def track(
             support=feet.support[i] if feet is not None else SIDES,
             com=feet.com[i] if feet is not None and np.isfinite(feet.com[i]).all() else None,
             contact={s: float(c[i]) for s, c in goals.contact.items() if goals.active[s][i] and c[i] > 0.0},
+            holding=(layer[1],) if layer[1] else (),
         )
         if i == 0:
             result = solver.solve(q, targets, cfg.initial_iterations)
