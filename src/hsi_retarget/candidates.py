@@ -55,10 +55,6 @@ class CandidateCache:
         self.hits = 0  #: [-] lookups answered from the cache
         self.misses = 0  #: [-] lookups that chose anew
 
-    def clear(self) -> None:
-        """Forget the cached choice."""
-        self._picks, self._key = None, ()
-
     def _lookup(self, key: tuple[object, ...], centers: F64, activation: float) -> _Picks | None:
         if (
             self._picks is None
@@ -110,11 +106,11 @@ def find_candidates(
         need += float(extra_margin.max(initial=0.0))
     picks: _Picks | None = None
     if bounds is not None and links is not None and np.isfinite(activation):
-        extra = 0.0 if cache is None else cache.slack
+        spare = 0.0 if cache is None else cache.slack
         key: tuple[object, ...] = (pairs, *(x for layer in layers for x in layer), *map(float, margins))
         picks = None if cache is None else cache._lookup(key, centers, need)
         if picks is None:
-            within = (margins, need + extra)
+            within = (margins, need + spare)
             picks = _cull(
                 centers,
                 pairs,

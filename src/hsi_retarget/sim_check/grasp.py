@@ -25,6 +25,7 @@ closed, nothing is held).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import mujoco
@@ -144,7 +145,7 @@ class GraspController:
             self.released[hand] = (target, time)
             self.records.append(GraspRecord(time, hand, target, "release"))
 
-    def expect(self, events: list[ContactEvent] | tuple[ContactEvent, ...], start: float) -> None:
+    def expect(self, events: Sequence[ContactEvent], start: float) -> None:
         """The grasps of a trajectory starting at simulated time ``start`` [s] (event times relative to it):
         each hand may touch its next target during its approach (:attr:`GraspConfig.approach_s`)."""
         self.expected = [(start + e.time, e.hand, e.object_name) for e in events if e.kind == "grasp"]
