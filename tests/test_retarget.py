@@ -433,9 +433,28 @@ def test_grippers_close_across_handle_bars_and_narrow_sides() -> None:
     assert np.all(np.isfinite(turned.wrist_position["right"]))
 
 
+def _left_carry(t: np.ndarray, tcp: np.ndarray) -> tuple[Any, tuple[ContactEvent, ...]]:
+    """Left-hand goals ``tcp`` (T, 4, 4) at ``t`` (T,) [s] carrying can1 from a grasp at 1 s to a release
+    at 3 s (the base at the origin)."""
+    from hsi_retarget.mapping import RobotGoals
+
+    n = t.shape[0]
+    goals = RobotGoals(
+        t=t,
+        tcp={"left": tcp},
+        active={"left": np.ones(n, bool)},
+        reachable={"left": np.ones(n, bool)},
+        reach_excess={"left": np.zeros(n)},
+        root=np.tile(np.eye(4), (n, 1, 1)),
+        lift=np.full(n, np.nan),
+        shoulder={"left": np.zeros((n, 3))},
+        scale=1.0,
+    )
+    return goals, (ContactEvent(1.0, "left", "grasp", "can1"), ContactEvent(3.0, "left", "release", "can1"))
+
+
 def test_carry_is_reaimed_from_the_reached_grasp_pose(dual: RobotModel) -> None:
     from hsi_retarget.carry_correction import carry_frames, correct_carry
-    from hsi_retarget.mapping import RobotGoals
 
     n = 121
     t = np.linspace(0.0, 4.0, n)
@@ -448,18 +467,7 @@ def test_carry_is_reaimed_from_the_reached_grasp_pose(dual: RobotModel) -> None:
     release[:3, 3] += [0.3, 0.2, 0.1]
     tcp = np.tile(planned, (n, 1, 1))
     tcp[t >= 2.0] = release
-    goals = RobotGoals(
-        t=t,
-        tcp={"left": tcp},
-        active={"left": np.ones(n, bool)},
-        reachable={"left": np.ones(n, bool)},
-        reach_excess={"left": np.zeros(n)},
-        root=np.tile(np.eye(4), (n, 1, 1)),
-        lift=np.full(n, np.nan),
-        shoulder={"left": np.zeros((n, 3))},
-        scale=1.0,
-    )
-    events = (ContactEvent(1.0, "left", "grasp", "can1"), ContactEvent(3.0, "left", "release", "can1"))
+    goals, events = _left_carry(t, tcp)
     fixed, records, first = correct_carry(goals, qs, dual, events, ease_s=0.5)
     i_grasp = int(np.searchsorted(t, 1.0 - 1e-9))
     assert carry_frames(t, events) == {i_grasp: events}  # where an IK pass re-aims it, with its release
@@ -480,7 +488,6 @@ def test_carry_is_reaimed_from_the_reached_grasp_pose(dual: RobotModel) -> None:
 
 def test_a_carry_is_moved_to_put_the_object_on_its_placement(dual: RobotModel) -> None:
     from hsi_retarget.carry_correction import place_carries
-    from hsi_retarget.mapping import RobotGoals
 
     n = 121
     t = np.linspace(0.0, 4.0, n)
@@ -491,18 +498,7 @@ def test_a_carry_is_moved_to_put_the_object_on_its_placement(dual: RobotModel) -
     release[:3, 3] += [0.3, 0.0, 0.0]
     tcp = np.tile(grasp, (n, 1, 1))
     tcp[t >= 2.0] = release
-    goals = RobotGoals(
-        t=t,
-        tcp={"left": tcp},
-        active={"left": np.ones(n, bool)},
-        reachable={"left": np.ones(n, bool)},
-        reach_excess={"left": np.zeros(n)},
-        root=np.tile(np.eye(4), (n, 1, 1)),
-        lift=np.full(n, np.nan),
-        shoulder={"left": np.zeros((n, 3))},
-        scale=1.0,
-    )
-    events = (ContactEvent(1.0, "left", "grasp", "can1"), ContactEvent(3.0, "left", "release", "can1"))
+    goals, events = _left_carry(t, tcp)
     place = bottom + np.array([0.3, 0.0, 0.0])  # where the planner meant it: the turn was not accounted for
     carries = [{"object": "can1", "hands": ["left"], "grasp": bottom.tolist(), "place": place.tolist()}]
     moved, records = place_carries(goals, events, carries, ease_s=0.5)
