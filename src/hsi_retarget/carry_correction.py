@@ -127,39 +127,33 @@ def place_carries(
     ``place`` bottom centres (3,) [m]), matched to the grasp events of the same object in order. Shifts
     below ``min_position`` [m] are left alone. Returns the goals and one record per shifted carry
     (``object``, ``time_s`` [s] of its grasp, ``shift_m`` (3,) [m])."""
-    t = goals.t
+    t, last = goals.t, goals.t.shape[0] - 1
     tcp = {s: np.array(p) for s, p in goals.tcp.items()}
     records: list[dict[str, Any]] = []
-    grasps: dict[str, list[float]] = {}
-    for hand, name, t_grasp, t_release in _carries(events):
-        if hand in tcp and t_release is not None and t_grasp not in grasps.setdefault(name, []):
-            grasps[name].append(t_grasp)
-    for name, times in grasps.items():
+    seen: set[tuple[str, float]] = set()  # a two-handed grasp is one carry
+    for _, name, t_grasp, t_release in _carries(events):
+        if (name, t_grasp) in seen:
+            continue
+        seen.add((name, t_grasp))
         own = [c for c in carries if c.get("object") == name]
-        for t_grasp, record in zip(sorted(times), own, strict=False):
-            if "place" not in record or "grasp" not in record:
-                continue
-            hands = [h for h in record.get("hands", ()) if h in tcp]
-            releases = [
-                e.time for e in events if e.kind == "release" and e.object_name == name and e.time > t_grasp
-            ]
-            if not hands or not releases:
-                continue
-            last = t.shape[0] - 1
-            i, r = (int(np.clip(np.searchsorted(t, x - 1e-9), 0, last)) for x in (t_grasp, min(releases)))
-            shifts = []
-            for (
-                h
-            ) in hands:  # the bottom centre, held rigidly from the grasp goal to the release goal, lands at
-                held = np.linalg.solve(tcp[h][i], np.append(np.asarray(record["grasp"], dtype=float), 1.0))
-                shifts.append(np.asarray(record["place"], dtype=float) - (tcp[h][r] @ held)[:3])
-            shift = np.mean(shifts, axis=0)  # two hands: the same shift (they keep their grip)
-            if float(np.linalg.norm(shift)) < min_position or r <= i:
-                continue
-            weight = _ease((t - t[i]) / max(float(t[r] - t[i]), 1e-9))
-            after = t > t[r]
-            weight[after] = 1.0 - _ease((t[after] - t[r]) / ease_s)
-            for h in hands:
-                tcp[h][:, :3, 3] += weight[:, None] * shift[None, :]
-            records.append({"object": name, "time_s": float(t_grasp), "shift_m": [float(v) for v in shift]})
+        k = sum(1 for n, _ in seen if n == name) - 1  # the k-th grasp of this object: its k-th record
+        if t_release is None or k >= len(own) or not {"grasp", "place"} <= set(own[k]):
+            continue
+        record = own[k]
+        hands = [h for h in record.get("hands", ()) if h in tcp]
+        i, r = (int(np.clip(np.searchsorted(t, x - 1e-9), 0, last)) for x in (t_grasp, t_release))
+        if not hands or r <= i:
+            continue
+        bottom = np.append(np.asarray(record["grasp"], dtype=float), 1.0)
+        # where the bottom centre lands, held rigidly from the grasp goal to the release goal
+        landed = [(tcp[h][r] @ np.linalg.solve(tcp[h][i], bottom))[:3] for h in hands]
+        shift = np.asarray(record["place"], dtype=float) - np.mean(landed, axis=0)  # two hands: one shift
+        if float(np.linalg.norm(shift)) < min_position:
+            continue
+        weight = _ease((t - t[i]) / max(float(t[r] - t[i]), 1e-9))
+        after = t > t[r]
+        weight[after] = 1.0 - _ease((t[after] - t[r]) / ease_s)
+        for h in hands:
+            tcp[h][:, :3, 3] += weight[:, None] * shift[None, :]
+        records.append({"object": name, "time_s": float(t_grasp), "shift_m": [float(v) for v in shift]})
     return replace(goals, tcp=tcp), records

@@ -71,6 +71,13 @@ class SphereSet:
         mask.flags.writeable = False
         return mask
 
+    @functools.cached_property
+    def grounded(self) -> NDArray[np.bool_]:
+        """(S,) True for the arm spheres: measured with the floor (the body's base stands on it)."""
+        mask = self.groups != _BODY
+        mask.flags.writeable = False
+        return np.asarray(mask)
+
     def of(self, group: str) -> I64:
         """Indices of the spheres of ``group`` (``left``, ``right`` or ``body``)."""
         return np.flatnonzero(self.groups == GROUPS.index(group)).astype(np.int64)
@@ -296,7 +303,7 @@ def collision_rows(
         centers,
         pairs,
         _layers(spheres, scene, extra),
-        spheres.groups != _BODY,  # the base stands on the floor: body spheres ignore it
+        spheres.grounded,  # the base stands on the floor: body spheres ignore it
         margins=margins,
         activation=activation,
         bounds=bounds,
@@ -340,7 +347,7 @@ def min_gap(
         centers,
         pairs,
         _layers(spheres, scene, extra),
-        spheres.groups != _BODY,
+        spheres.grounded,
         margins=margins,
         activation=activation,
         bounds=bounds,
