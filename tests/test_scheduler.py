@@ -10,6 +10,7 @@ durations equal the time between their keyframes.
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 from collections.abc import Iterator
 from typing import Any
@@ -23,6 +24,7 @@ from hsi_planning.errors import HsiError, PlanningError
 from hsi_planning.scene import SceneSpec, object_pose
 from hsi_planning.scene_paths import load_scene
 from hsi_planning.scheduler import (
+    AuxiliaryConfig,
     HandState,
     ReachModelPlanner,
     SceneWorld,
@@ -30,7 +32,9 @@ from hsi_planning.scheduler import (
     Scheduler,
     SchedulerConfig,
     Task,
+    find_blockers,
 )
+from hsi_planning.scheduler.world import WorldState
 
 ARM_REACH = 0.75
 BODY_RADIUS = 0.25
@@ -314,3 +318,24 @@ def test_schedule_json_round_trip(scenarios: dict[str, Schedule], tmp_path: Any)
         "contact_event",
         "object",
     }
+
+
+def test_a_neighbour_in_the_straight_approach_corridor_blocks_a_gripper() -> None:
+    """The human reach passes a mug beside the can's way out; a gripper following the straight approach
+    out of the shelf (``corridor_radius``) does not fit past it, so the mug is moved first."""
+    spec = load_scene("narrow_shelf")
+    objects = tuple(
+        dataclasses.replace(o, xy=(o.xy[0] - 0.04, o.xy[1] - 0.055)) if o.name == "mug1" else o
+        for o in spec.objects
+        if o.name != "bottle1"
+    )
+    world = SceneWorld(dataclasses.replace(spec, objects=objects))
+
+    def blockers(radius: float) -> list[str]:
+        config = AuxiliaryConfig(hand_radius=0.05, corridor_radius=radius)
+        return find_blockers(world, ReachModelPlanner(), "can1", WorldState(), config=config)
+
+    assert blockers(0.0) == []
+    assert blockers(0.07) == ["mug1"]
+    with pytest.raises(HsiError, match="corridor_radius"):
+        AuxiliaryConfig(corridor_radius=-0.01)

@@ -67,6 +67,11 @@ ROBOT_BODY_RADIUS: dict[str, float] = {"dual_ur5e": 0.4, "humanoid": 0.25}
 #: (palms 11–15 cm wide) needs more room than a human hand (the planner's default 3.5 cm) to reach past a
 #: neighbour.
 ROBOT_HAND_RADIUS = 0.05
+#: Radius of the straight approach corridor out of a cabinet's or shelf's front that the scheduler keeps
+#: free of neighbours [m] (:class:`~hsi_planning.scheduler.AuxiliaryConfig`): the grippers follow the
+#: straight final approach, and a planned wrist path winding past a neighbour leaves their palm and
+#: wrist no room.
+ROBOT_CORRIDOR_RADIUS = 0.05
 #: Planner names of the demo: the scheduler's, plus the minimum-jerk baseline.
 DEMO_PLANNERS: tuple[str, ...] = tuple(dict.fromkeys((*SCHEDULER_PLANNERS, "minjerk")))
 
@@ -109,7 +114,7 @@ class PipelineConfig:
 
         overrides = {
             "body": {"body_radius": self.root_radius},
-            "auxiliary": {"hand_radius": ROBOT_HAND_RADIUS},
+            "auxiliary": {"hand_radius": ROBOT_HAND_RADIUS, "corridor_radius": ROBOT_CORRIDOR_RADIUS},
         }
         return from_mapping(SchedulerConfig, overrides, where="demo")
 

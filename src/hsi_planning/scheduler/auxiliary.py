@@ -9,6 +9,10 @@ obstacles; if that fails or the carried target still touches another object, it 
 target's neighbours on the same support left out of the obstacles, and every neighbour that the carried
 target (its points moved along the leave segment) or the hand sphere comes within ``clearance`` of, while
 still inside the container, is a blocker. Blockers are ordered by when the take-out would hit them.
+A planned path may wind past a neighbour with a hand sphere's room to spare where a robot's gripper and
+wrist, which follow the straight approach through the opening, do not fit: with ``corridor_radius`` > 0,
+every neighbour with points inside the container within that radius of the straight line from the target
+out of a front opening (cabinets, shelves) blocks as well, nearest to the opening first.
 
 **Free spot.** Candidate spots on the open support surfaces (counters, tables, shelf boards; cabinet and
 drawer floors only when open) where the object's footprint holds no points, outside the target's take-out
@@ -51,9 +55,19 @@ class AuxiliaryConfig:
     spot_margin: float = 0.02  #: [m] free margin around a spot's footprint
     corridor_margin: float = 0.03  #: [m] extra width of the target's take-out corridor kept free
     free_distance: float = 0.35  #: [m] free wrist pose distance from the contact (take-out end)
+    #: [m] radius of the straight approach corridor out of a front opening that must be free of
+    #: neighbours (a gripper's half width plus room); 0 = only the planned take-out decides
+    corridor_radius: float = 0.0
 
     def __post_init__(self) -> None:
-        for name in ("clearance", "hand_radius", "palm_offset", "spot_margin", "corridor_margin"):
+        for name in (
+            "clearance",
+            "hand_radius",
+            "palm_offset",
+            "spot_margin",
+            "corridor_margin",
+            "corridor_radius",
+        ):
             if getattr(self, name) < 0.0:
                 raise ConfigError(f"AuxiliaryConfig.{name} must be >= 0 m, got {getattr(self, name)}")
         if not (self.spot_step > 0.0 and self.free_distance > 0.0):
@@ -189,11 +203,33 @@ def find_blockers(
             )
             continue
         hits = _hits(leave, target_pts, others, _inside(leave.position, support, axis), config)
+        in_way = _corridor_blockers(target_pts, others, support, axis, config.corridor_radius)
+        hits += [n for n in in_way if n not in hits]
         if attempt == 0 and not hits:
             return []
         if attempt == 1:
             return hits
     return []
+
+
+def _corridor_blockers(
+    target_pts: F64, others: dict[str, F64], support: SupportSurface, axis: F64, radius: float
+) -> list[str]:
+    """Neighbours with points inside the container within ``radius`` [m] of the straight line from the
+    target's centre out along a front opening's ``axis``, nearest to the opening first (none for top
+    access or ``radius`` 0)."""
+    if radius <= 0.0 or abs(float(axis[2])) > 0.9:
+        return []
+    centre = 0.5 * (target_pts.min(axis=0) + target_pts.max(axis=0))
+    found: dict[str, float] = {}
+    for name, pts in others.items():
+        rel = pts - centre
+        along = rel @ axis
+        lateral = np.linalg.norm(rel - np.outer(along, axis), axis=1)
+        near = (along > 0.0) & (lateral < radius) & _inside(pts, support, axis)
+        if near.any():
+            found[name] = float(along[near].min())
+    return sorted(found, key=lambda n: -found[n])
 
 
 def _without(cloud: LabelledCloud, names: list[str]) -> LabelledCloud:
