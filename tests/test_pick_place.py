@@ -36,11 +36,12 @@ from hsi_planning.config import from_mapping
 from hsi_planning.errors import ConfigError, PlanningError
 from hsi_planning.perception import LabelledCloud
 from hsi_planning.scene import SceneSpec
+from hsi_planning.scene.model import support_surface
 from hsi_planning.scene_paths import load_scene
 from hsi_planning.scheduler import ReachModelPlanner, SceneWorld, find_blockers
 from hsi_planning.scheduler.auxiliary import AuxiliaryConfig
 from hsi_planning.scheduler.world import WorldState
-from hsi_retarget.grasp_depth import GraspDepthConfig, grasp_windows, shape_grasps
+from hsi_retarget.grasp_depth import GraspDepthConfig, container_rims, grasp_windows, shape_grasps
 from hsi_retarget.gripper_dwell import DwellConfig, add_gripper_dwell
 from hsi_retarget.joint_trajectory import ContactEvent, JointTrajectory
 from hsi_retarget.sources import human_motion_from_schedule
@@ -170,6 +171,21 @@ def test_gripper_goals_around_the_grasps(dual_arm: TaskOutcome) -> None:
     high = shape_grasps(motion, windows, dataclasses.replace(cfg, top_standoff=0.2)).wrist_position[side]
     assert np.abs(np.cross(high[line] - goal, axis)).max() < 1e-6
     assert ((high[line] - goal) @ axis).min() < -0.1
+    # out of an open container, it comes down from rim_clearance above the rim (not for the release)
+    rim = float(goal[2]) + 0.1
+    rimmed = grasp_windows(schedule, ["can1"], cfg, rims={"can1": rim})
+    assert [w.rim for w in rimmed] == [rim, -np.inf]
+    deep = shape_grasps(motion, rimmed, cfg).wrist_position[side]
+    assert np.abs(np.cross(deep[line] - goal, axis)).max() < 1e-6
+    pre = goal - (rim + cfg.rim_clearance - goal[2]) * axis  # axis: straight down
+    assert np.linalg.norm(deep[approach] - pre, axis=1).min() < 1e-3
+    np.testing.assert_allclose(deep[t > grasp.after[1]], p1[t > grasp.after[1]], atol=1e-12)
+    # the kitchen's rims: the mug in the top drawer gets its walls' top, counter and shelf objects none
+    kitchen = load_scene("kitchen")
+    drawer = support_surface(kitchen, "drawer_unit1/drawer1")
+    rim = pytest.approx(drawer.top_z + drawer.ceiling)
+    assert container_rims(kitchen) == {"mug2": rim, "box2": rim}
+    assert container_rims(None) == {}
     # the first retreat after the grasp lifts the object straight back along the axis (+ lift)
     a0, a1 = grasp.after
     post = goal - 0.08 * axis + [0.0, 0.0, 0.01]

@@ -30,9 +30,9 @@ Times are unchanged: the shaping only moves the goals. Everything is a function 
 
 from __future__ import annotations
 
-from collections.abc import Collection, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -44,7 +44,7 @@ from hsi_retarget.human_motion import HumanMotion
 if TYPE_CHECKING:  # the scheduler package is heavy; only its types are needed here
     from hsi_planning.scheduler.schedule import Schedule
 
-__all__ = ["GraspDepthConfig", "GraspWindow", "grasp_windows", "shape_grasps"]
+__all__ = ["GraspDepthConfig", "GraspWindow", "container_rims", "grasp_windows", "shape_grasps"]
 
 F64 = NDArray[np.float64]
 _EPS = 1e-3  #: [s] tolerance matching event and segment times
@@ -74,11 +74,23 @@ class GraspDepthConfig:
     lift: float = 0.02
     #: Height above the release pose where the straight final approach of a release starts [m].
     place_height: float = 0.04
+    #: Height above a container's rim (:attr:`GraspWindow.rim`, an open drawer's walls) where the straight
+    #: top-down approach into a grasp in it starts and its first retreat ends: the fingers below the TCP
+    #: clear the rim instead of catching on it [m].
+    rim_clearance: float = 0.08
     #: A carried object turns smoothly from its grasp to its release orientation (else: planned) [-].
     hold_orientation: bool = True
 
     def __post_init__(self) -> None:
-        for name in ("palm_offset", "grasp_depth", "standoff", "top_standoff", "lift", "place_height"):
+        for name in (
+            "palm_offset",
+            "grasp_depth",
+            "standoff",
+            "top_standoff",
+            "lift",
+            "place_height",
+            "rim_clearance",
+        ):
             if not 0.0 <= getattr(self, name) <= 0.3:
                 raise ConfigError(f"GraspDepthConfig.{name} must be in [0, 0.3] m, got {getattr(self, name)}")
         if not 0.0 <= self.grasp_straight <= 0.6:
@@ -108,6 +120,26 @@ class GraspWindow:
     time: float  #: [s] the event
     before: tuple[float, float]  #: [s] the approach into the contact (start, end)
     after: tuple[float, float]  #: [s] the withdrawal after it (start, end)
+    #: [m] world height of the rim of the open container a top-down grasp reaches into (-inf: none)
+    rim: float = -np.inf
+
+
+def container_rims(scene: Any) -> dict[str, float]:
+    """Object -> world height [m] of the walls' top of the drawer it stands in (:attr:`GraspWindow.rim`),
+    for the objects of a scene spec; objects on open surfaces or boards have none (``{}`` for anything
+    but a spec)."""
+    if not (hasattr(scene, "furniture") and hasattr(scene, "objects")):
+        return {}
+    from hsi_planning.scene.model import support_surfaces
+
+    supports = support_surfaces(scene)
+    kinds = {f.name: f.kind for f in scene.furniture}
+    out = {}
+    for obj in scene.objects:
+        s = supports.get(obj.on)
+        if s is not None and kinds.get(s.furniture) == "drawer_unit" and s.body != s.furniture:  # a drawer
+            out[obj.name] = float(s.top_z + s.ceiling)
+    return out
 
 
 def _hands(hand: str) -> tuple[str, ...]:
@@ -115,12 +147,17 @@ def _hands(hand: str) -> tuple[str, ...]:
 
 
 def grasp_windows(
-    schedule: Schedule, objects: Collection[str], config: GraspDepthConfig
+    schedule: Schedule,
+    objects: Collection[str],
+    config: GraspDepthConfig,
+    rims: Mapping[str, float] | None = None,
 ) -> list[GraspWindow]:
     """The grasp and release windows of ``schedule`` (time order); ``objects`` are the free objects (other
     targets are doors and drawers). The approach is the hand's last planned segment ending at the event, the
-    withdrawal its first one starting after it (``ramp_s`` windows where there is none)."""
+    withdrawal its first one starting after it (``ramp_s`` windows where there is none). ``rims``: object ->
+    world height [m] of the rim of the open container it is grasped from (:attr:`GraspWindow.rim`)."""
     names = set(objects)
+    rims = rims or {}
     out: list[GraspWindow] = []
     for k in schedule.events():
         if k.contact_event not in ("grasp", "release"):
@@ -136,7 +173,8 @@ def grasp_windows(
             if after and after[0].start_time - k.time > config.ramp_s + 1.0:  # a later, unrelated segment
                 a = (k.time, k.time + config.ramp_s)
             free = k.object_name in names
-            out.append(GraspWindow(hand, str(k.contact_event), k.object_name, free, k.time, b, a))
+            rim = rims.get(k.object_name, -np.inf) if k.contact_event == "grasp" else -np.inf
+            out.append(GraspWindow(hand, str(k.contact_event), k.object_name, free, k.time, b, a, rim))
     return out
 
 
@@ -195,6 +233,8 @@ class _Hand:
         dist = np.linalg.norm(self.p[inside] - self.p[i], axis=1)
         top = w.free and float(rot[2, 0]) < -np.cos(np.radians(30.0))  # approach straight down
         standoff = max(cfg.top_standoff, cfg.standoff) if top and cfg.standoff > 0.0 else cfg.standoff
+        if top and cfg.standoff > 0.0:  # down from above the rim of an open container
+            standoff = max(standoff, w.rim + cfg.rim_clearance - float(goal[2]))
         length = float(min(standoff, dist.max(initial=0.0)))
         far = t[inside][dist >= standoff - 1e-9]
         straight = min(cfg.straight_min_s, 0.6 * span)

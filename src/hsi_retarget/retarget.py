@@ -27,7 +27,13 @@ from hsi_planning.errors import ConfigError, RetargetError
 from hsi_planning.trajectory import WristTrajectory
 from hsi_retarget.carry_correction import carry_frames, correct_carry, place_carries
 from hsi_retarget.finger_room import FingerRoomConfig, make_finger_room
-from hsi_retarget.grasp_depth import GraspDepthConfig, GraspWindow, grasp_windows, shape_grasps
+from hsi_retarget.grasp_depth import (
+    GraspDepthConfig,
+    GraspWindow,
+    container_rims,
+    grasp_windows,
+    shape_grasps,
+)
 from hsi_retarget.grip_turn import (
     DEFAULT_OPENING,
     GripTurnConfig,
@@ -134,7 +140,7 @@ def _human_motion(
         turns: list[dict[str, Any]] = []
         windows: list[GraspWindow] = []
         if cfg.grasp is not None:
-            windows = grasp_windows(schedule, _free_objects(scene, motion), cfg.grasp)
+            windows = grasp_windows(schedule, _free_objects(scene, motion), cfg.grasp, container_rims(scene))
             if hasattr(scene, "furniture"):  # a scene spec: its handle bars and object shapes
                 bars, prims = handle_bar_axes(scene), object_prims(scene)
                 motion, turns = turn_grips(motion, windows, bars, prims, cfg.grip)
