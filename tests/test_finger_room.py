@@ -10,7 +10,7 @@ import trimesh
 from hsi_planning.errors import ConfigError
 from hsi_planning.scene_paths import load_scene
 from hsi_retarget.finger_room import FingerRoomConfig, make_finger_room
-from hsi_retarget.grasp_depth import GraspWindow
+from hsi_retarget.grasp_windows import GraspWindow
 from hsi_retarget.grip_turn import object_prims
 from hsi_retarget.ik import IKSolver
 from hsi_retarget.mapping import RobotGoals

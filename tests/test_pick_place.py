@@ -41,7 +41,8 @@ from hsi_planning.scene_paths import load_scene
 from hsi_planning.scheduler import ReachModelPlanner, SceneWorld, find_blockers
 from hsi_planning.scheduler.auxiliary import AuxiliaryConfig
 from hsi_planning.scheduler.world import WorldState
-from hsi_retarget.grasp_depth import GraspDepthConfig, container_rims, grasp_windows, shape_grasps
+from hsi_retarget.grasp_depth import GraspDepthConfig, shape_grasps
+from hsi_retarget.grasp_windows import container_rims, grasp_windows
 from hsi_retarget.gripper_dwell import DwellConfig, add_gripper_dwell
 from hsi_retarget.joint_trajectory import ContactEvent, JointTrajectory
 from hsi_retarget.sources import human_motion_from_schedule

@@ -379,7 +379,7 @@ def test_retarget_node_turns_wrist_segments_into_a_joint_trajectory() -> None:
 
 def test_grippers_close_across_handle_bars_and_narrow_sides() -> None:
     from hsi_planning.scene_paths import load_scene
-    from hsi_retarget.grasp_depth import GraspWindow
+    from hsi_retarget.grasp_windows import GraspWindow
     from hsi_retarget.grip_turn import (
         GripTurnConfig,
         across_bar_angle,

@@ -5,7 +5,7 @@ A parallel gripper approaching an object fully open needs its whole stroke on bo
 (14 cm for the dual arm's gripper). In a crowded drawer or between close neighbours there is no such room
 along the planned finger axis, and the per-frame IK then stops the gripper above the object at its
 collision margins: the grasp is missed. :func:`make_finger_room` changes the robot's goals around every
-free-object grasp (:class:`~hsi_retarget.grasp_depth.GraspWindow`, after the mapping):
+free-object grasp (:class:`~hsi_retarget.grasp_windows.GraspWindow`, after the mapping):
 
 - **aperture**: the fingers open only ``clearance`` [m] wider than the object on each side (half its extent
   along the finger axis), capped at the stroke. :attr:`RobotGoals.finger` carries the opening per finger
@@ -35,7 +35,7 @@ from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
 from hsi_planning.errors import ConfigError
-from hsi_retarget.grasp_depth import GraspWindow
+from hsi_retarget.grasp_windows import GraspWindow
 from hsi_retarget.grip_turn import grip_phases, object_width, turn_weight
 from hsi_retarget.mapping import RobotGoals
 

@@ -28,7 +28,7 @@ from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
 from hsi_planning.errors import ConfigError
-from hsi_retarget.grasp_depth import GraspWindow
+from hsi_retarget.grasp_windows import GraspWindow
 from hsi_retarget.human_motion import HumanMotion
 
 __all__ = [

@@ -27,13 +27,8 @@ from hsi_planning.errors import ConfigError, RetargetError
 from hsi_planning.trajectory import WristTrajectory
 from hsi_retarget.carry_correction import carry_frames, correct_carry, place_carries
 from hsi_retarget.finger_room import FingerRoomConfig, make_finger_room
-from hsi_retarget.grasp_depth import (
-    GraspDepthConfig,
-    GraspWindow,
-    container_rims,
-    grasp_windows,
-    shape_grasps,
-)
+from hsi_retarget.grasp_depth import GraspDepthConfig, shape_grasps
+from hsi_retarget.grasp_windows import GraspWindow, container_rims, grasp_windows
 from hsi_retarget.grip_turn import (
     DEFAULT_OPENING,
     GripTurnConfig,
