@@ -4,8 +4,8 @@ The planners place a grasp's wrist ``palm_offset`` [m] beyond the object's box a
 (the palm touches the object; :func:`hsi_planning.scheduler.reach_planner.contact_from_points`), and the
 retargeter maps the wrist onto the robot's TCP one to one (``MappingConfig(anchor="world")``). A parallel
 gripper has to close *around* the object and holds it rigidly, so around every grasp and release
-(:class:`GraspWindow`, from :func:`grasp_windows`) :func:`shape_grasps` rewrites the wrist goals of a
-:class:`~hsi_retarget.human_motion.HumanMotion`:
+(:class:`~hsi_retarget.grasp_windows.GraspWindow`, from :func:`~hsi_retarget.grasp_windows.grasp_windows`)
+:func:`shape_grasps` rewrites the wrist goals of a :class:`~hsi_retarget.human_motion.HumanMotion`:
 
 - **depth**: while a free object is held the TCP goal is ``offset = palm_offset + grasp_depth`` further
   along the planned wrist's x axis (the approach direction; the TCP's z axis): the planned grasp point,
