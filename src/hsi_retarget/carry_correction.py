@@ -131,12 +131,13 @@ def place_carries(
     tcp = {s: np.array(p) for s, p in goals.tcp.items()}
     records: list[dict[str, Any]] = []
     seen: set[tuple[str, float]] = set()  # a two-handed grasp is one carry
+    grasped: dict[str, int] = {}  # grasps of each object so far: the k-th one has its k-th record
     for _, name, t_grasp, t_release in _carries(events):
         if (name, t_grasp) in seen:
             continue
         seen.add((name, t_grasp))
+        k = grasped[name] = grasped.get(name, -1) + 1
         own = [c for c in carries if c.get("object") == name]
-        k = sum(1 for n, _ in seen if n == name) - 1  # the k-th grasp of this object: its k-th record
         if t_release is None or k >= len(own) or not {"grasp", "place"} <= set(own[k]):
             continue
         record = own[k]

@@ -180,6 +180,7 @@ def find_blockers(
     neighbours = [n for n in neighbours if n not in state.held]
     others = {n: label_points(cloud, [n]) for n in neighbours}
     others = {n: p for n, p in others.items() if len(p)}
+    in_way = _corridor_blockers(target_pts, others, support, axis, config.corridor_radius)
     for attempt, plan_cloud in enumerate((cloud, _without(cloud, list(others)))):
         request = PlanRequest(
             cloud=plan_cloud,
@@ -203,7 +204,6 @@ def find_blockers(
             )
             continue
         hits = _hits(leave, target_pts, others, _inside(leave.position, support, axis), config)
-        in_way = _corridor_blockers(target_pts, others, support, axis, config.corridor_radius)
         hits += [n for n in in_way if n not in hits]
         if attempt == 0 and not hits:
             return []
