@@ -228,11 +228,15 @@ def test_footsteps_shift_the_weight_and_crouch_smoothly(robots: dict[str, RobotM
     pelvis[:, 2, 3] = robot.q_home[2]
     pelvis[:, 0, 3] = np.clip(t - 0.5, 0.0, 0.6)  # the pelvis goal walks 60 cm forward
     steps = plan_footsteps(robot, t, pelvis, cfg)
-    assert len(steps.steps) >= 4  # two step pairs at least (25 cm steps)
+    assert len(steps.steps) >= 4  # two step pairs at least (45 cm steps at most)
     xy = np.where(np.isfinite(steps.com), steps.com, pelvis[:, :2, 3])  # the pelvis xy goal the IK gets
     speed = np.linalg.norm(np.diff(xy, axis=0), axis=1) * 60.0
-    assert speed.max() < 3.0, speed.max()  # [m/s]: no jump between the feet or back under the pelvis
-    assert np.abs(np.diff(steps.crouch)).max() * 60.0 < 0.5  # [m/s]: the pelvis lowers and rises gently
+    # [m/s]: no jump between the feet or back under the pelvis: a min-jerk shift over the widest stance
+    # peaks at 1.875 x its mean speed
+    spread = np.linalg.norm(steps.feet["left"][:, :2, 3] - steps.feet["right"][:, :2, 3], axis=1).max()
+    assert speed.max() < 1.9 * spread / cfg.shift_time, (speed.max(), spread)
+    crouch_speed = np.abs(np.diff(steps.crouch)).max() * 60.0  # [m/s]: the pelvis lowers and rises gently
+    assert crouch_speed < 1.9 * cfg.step_crouch / cfg.shift_time
     assert steps.crouch[-1] == 0.0 and np.isnan(steps.com[-1]).all()  # upright and free after the steps
     for j, sides in enumerate(steps.support):  # on one foot the weight is over it
         if len(sides) == 1:
@@ -240,6 +244,28 @@ def test_footsteps_shift_the_weight_and_crouch_smoothly(robots: dict[str, RobotM
     u = 0.99999999  # the min-jerk polynomial rounds past 1 here: a swing's slerp must not see that
     assert 10 * u**3 - 15 * u**4 + 6 * u**5 > 1.0
     np.testing.assert_allclose(_swing(np.eye(4), np.eye(4), u, 0.05), np.eye(4), atol=1e-6)
+
+
+def test_footsteps_keep_up_with_a_walking_pelvis(robots: dict[str, RobotModel]) -> None:
+    from hsi_retarget.humanoid_ik import _stance, plan_footsteps
+
+    robot, cfg = robots["humanoid"], SupportConfig()
+    t = np.arange(0.0, 6.0, 1.0 / 60.0)
+    pelvis = np.tile(np.eye(4), (t.shape[0], 1, 1))
+    pelvis[:, 2, 3] = robot.q_home[2]
+    pelvis[:, 0, 3] = np.clip((t - 0.5) / 1.5, 0.0, 1.0)  # 1 m at 0.67 m/s, standing from 2.0 s on
+    steps = plan_footsteps(robot, t, pelvis, cfg)
+    final = _stance(robot, pelvis[-1])
+    after = np.flatnonzero(t >= 3.5)  # 1.5 s after the pelvis stopped: on both feet, under it
+    for j in after:
+        assert steps.support[j] == ("left", "right")
+        for side, pose in final.items():
+            assert np.linalg.norm(steps.feet[side][j][:2, 3] - pose[:2, 3]) <= cfg.step_threshold
+    assert max(float(s["length_m"]) for s in steps.steps) <= cfg.max_step_length + 1e-9
+    # with the former 25 cm steps of 0.7 s the feet were still 0.5 m behind at 5 s
+    former = SupportConfig(max_step_length=0.25, shift_time=0.3, swing_time=0.4)
+    slow = plan_footsteps(robot, t, pelvis, former)
+    assert np.linalg.norm(slow.feet["left"][after[0]][:2, 3] - final["left"][:2, 3]) > 0.3
 
 
 def test_support_polygon_is_the_hull_of_both_soles(robots: dict[str, RobotModel]) -> None:

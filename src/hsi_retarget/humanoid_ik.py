@@ -44,10 +44,10 @@ class SupportConfig:
     com_weight: float = 10.0  #: [1/m^2] soft CoM goal during a weight shift
     step_threshold: float = 0.12  #: [m] stance foot displacement that triggers a step
     yaw_threshold: float = 0.35  #: [rad] stance heading change that triggers a step
-    max_step_length: float = 0.25  #: [m] longest single step
+    max_step_length: float = 0.45  #: [m] longest single step
     step_crouch: float = 0.07  #: [m] the pelvis goal is lowered this much while stepping (leg reach)
-    shift_time: float = 0.3  #: [s] weight shift over the stance foot before a swing
-    swing_time: float = 0.4  #: [s] swing duration
+    shift_time: float = 0.2  #: [s] weight shift over the stance foot before a swing
+    swing_time: float = 0.35  #: [s] swing duration
     swing_height: float = 0.05  #: [m] apex of the swing arc
 
     def __post_init__(self) -> None:
