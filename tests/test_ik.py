@@ -219,14 +219,20 @@ def test_humanoid_side_grasp_with_the_forearm_about_neutral(robots: dict[str, Ro
         assert abs(result.q[robot.q_index(f"{side}_wrist_yaw")]) < 0.2  # of +-1.4 rad
 
 
+def _walking_pelvis(robot: RobotModel, x: np.ndarray) -> np.ndarray:
+    """(T, 4, 4) upright pelvis goals at the home height, at forward positions ``x`` (T,) [m]."""
+    pelvis = np.tile(np.eye(4), (x.shape[0], 1, 1))
+    pelvis[:, 2, 3] = robot.q_home[2]
+    pelvis[:, 0, 3] = x
+    return pelvis
+
+
 def test_footsteps_shift_the_weight_and_crouch_smoothly(robots: dict[str, RobotModel]) -> None:
     from hsi_retarget.humanoid_ik import _swing, plan_footsteps
 
     robot, cfg = robots["humanoid"], SupportConfig()
     t = np.arange(0.0, 6.0, 1.0 / 60.0)
-    pelvis = np.tile(np.eye(4), (t.shape[0], 1, 1))
-    pelvis[:, 2, 3] = robot.q_home[2]
-    pelvis[:, 0, 3] = np.clip(t - 0.5, 0.0, 0.6)  # the pelvis goal walks 60 cm forward
+    pelvis = _walking_pelvis(robot, np.clip(t - 0.5, 0.0, 0.6))  # the pelvis goal walks 60 cm forward
     steps = plan_footsteps(robot, t, pelvis, cfg)
     assert len(steps.steps) >= 4  # two step pairs at least (45 cm steps at most)
     xy = np.where(np.isfinite(steps.com), steps.com, pelvis[:, :2, 3])  # the pelvis xy goal the IK gets
@@ -251,9 +257,7 @@ def test_footsteps_keep_up_with_a_walking_pelvis(robots: dict[str, RobotModel]) 
 
     robot, cfg = robots["humanoid"], SupportConfig()
     t = np.arange(0.0, 6.0, 1.0 / 60.0)
-    pelvis = np.tile(np.eye(4), (t.shape[0], 1, 1))
-    pelvis[:, 2, 3] = robot.q_home[2]
-    pelvis[:, 0, 3] = np.clip((t - 0.5) / 1.5, 0.0, 1.0)  # 1 m at 0.67 m/s, standing from 2.0 s on
+    pelvis = _walking_pelvis(robot, np.clip((t - 0.5) / 1.5, 0.0, 1.0))  # 1 m at 0.67 m/s, stops at 2.0 s
     steps = plan_footsteps(robot, t, pelvis, cfg)
     final = _stance(robot, pelvis[-1])
     after = np.flatnonzero(t >= 3.5)  # 1.5 s after the pelvis stopped: on both feet, under it
@@ -262,7 +266,7 @@ def test_footsteps_keep_up_with_a_walking_pelvis(robots: dict[str, RobotModel]) 
         for side, pose in final.items():
             assert np.linalg.norm(steps.feet[side][j][:2, 3] - pose[:2, 3]) <= cfg.step_threshold
     assert max(float(s["length_m"]) for s in steps.steps) <= cfg.max_step_length + 1e-9
-    # with the former 25 cm steps of 0.7 s the feet were still 0.5 m behind at 5 s
+    # with the former 25 cm steps of 0.7 s the feet were still 0.7 m behind at 3.5 s (0.5 m at 5 s)
     former = SupportConfig(max_step_length=0.25, shift_time=0.3, swing_time=0.4)
     slow = plan_footsteps(robot, t, pelvis, former)
     assert np.linalg.norm(slow.feet["left"][after[0]][:2, 3] - final["left"][:2, 3]) > 0.3
