@@ -402,7 +402,7 @@ class IKSolver:
     def sphere_centers(self, q: F64) -> F64:
         """(S, 3) [m] world centres of :attr:`spheres` at ``q`` (nq,)."""
         pin.framesForwardKinematics(self._model, self._data, np.asarray(q, dtype=np.float64))
-        return self.spheres.world(self._data)
+        return self._bounds.world(self._data, self.spheres)[1]
 
     def clearance(self, q: F64, within: float | None = None) -> float:
         """[m] smallest sphere clearance minus its margin (scene and self) at ``q``; ``inf`` when every pair

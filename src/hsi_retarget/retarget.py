@@ -231,6 +231,7 @@ def track(
             contact={s: float(c[i]) for s, c in goals.contact.items() if goals.active[s][i] and c[i] > 0.0},
             holding=(layer[1],) if layer[1] else (),
         )
+        errors: tuple[dict[str, float], dict[str, float]] | None = None  # those of q, once measured
         if i == 0:
             result = solver.solve(q, targets, cfg.initial_iterations)
             q, fallbacks = result.q, result.fallbacks
@@ -240,12 +241,13 @@ def track(
             for _ in range(cfg.iterations_per_frame):
                 q_prev = q
                 q, info = solver.step(q, targets, dt, q_start)
+                errors = None
                 fallbacks += int(info.fallback > 0)
                 min_clear = min(min_clear, info.min_clearance)
                 if float(np.max(np.abs(q - q_prev))) < cfg.settle_step:  # settled: more steps change ~nothing
                     break
-                pe, oe = solver.errors(q, targets)
-                if all(pe[s] <= tol_p and oe[s] <= tol_o for s in pe):
+                errors = solver.errors(q, targets)
+                if all(errors[0][s] <= tol_p and errors[1][s] <= tol_o for s in errors[0]):
                     break
             # a large step can cut into a margin beyond its linearization: push back out on this frame
             extra = cfg.repair_iterations if info.min_clearance < 0.01 else 0
@@ -253,12 +255,13 @@ def track(
                 extra = 0  # the last step cannot have cut that deep: skip the full clearance query
             while extra > 0 and solver.clearance(q) < -cfg.repair_depth:
                 q, info = solver.step(q, targets, dt, q_start)
+                errors = None
                 extra -= 1
         qs[i] = q
         if i in carries:  # the hand closes here: carry from the pose it reached
             goals, found, _ = correct_carry(goals, qs, robot, carries[i])
             corrections += found
-        pe, oe = solver.errors(q, targets)
+        pe, oe = errors if errors is not None else solver.errors(q, targets)
         for s in pe:
             pos_err[s][i], ori_err[s][i] = pe[s], oe[s]
     solver.set_part_scene(None)
