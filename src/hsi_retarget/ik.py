@@ -126,6 +126,9 @@ class IKTargets:
         posture: (nq,) posture configuration; ``None``: the robot's home.
         contact: side -> [0..1] closeness of its TCP goal to a contact (scales its task weights up).
         holding: sides holding an opened door's or drawer's handle (their TCP weights scaled up more).
+        arm: side -> ((nq,) configuration, weight [1/rad^2]): a task pulling that arm's joints towards
+            the configuration's (e.g. an arm configuration found to reach a grasp,
+            :mod:`hsi_retarget.arm_branch`); unlike the posture, it competes with the other tasks.
     """
 
     tcp: dict[str, F64] = field(default_factory=dict)
@@ -137,6 +140,7 @@ class IKTargets:
     posture: F64 | None = None
     contact: dict[str, float] = field(default_factory=dict)
     holding: tuple[str, ...] = ()
+    arm: dict[str, tuple[F64, float]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -200,6 +204,13 @@ class IKSolver:
         if robot.floating:
             self._posture_w[:6] = 0.0
             self._pelvis = robot.model.getFrameId(robot.description.links[0].name, pin.FrameType.BODY)
+        self._arm = {  # side -> arm joints' (q indices, v indices)
+            side: (
+                np.array([robot.q_index(j) for j in names], dtype=np.int64),
+                np.array([robot.v_index(j) for j in names], dtype=np.int64),
+            )
+            for side, names in robot.arm_joints.items()
+        }
         self._base_v = [robot.v_index(j) for j in BASE_JOINTS if j in robot.joint_names]
         self._base_q = [robot.q_index(j) for j in BASE_JOINTS if j in robot.joint_names]
         #: [rad] the base yaw's range (a holonomic base turns within it, the long way round if need be)
@@ -266,6 +277,12 @@ class IKSolver:
                 jac = np.zeros((3, nv))
                 jac[[0, 1, 2], self._base_v] = 1.0
                 add(jac, err, np.full(3, root_weight))
+        for side, (goal_q, weight) in targets.arm.items():
+            if weight > 0.0:
+                iq, iv = self._arm[side]
+                jac = np.zeros((iv.shape[0], nv))
+                jac[np.arange(iv.shape[0]), iv] = 1.0
+                add(jac, np.asarray(goal_q)[iq] - q[iq], np.full(iv.shape[0], weight))
         if targets.lift is not None and self._lift is not None and cfg.lift_weight > 0.0:
             jac = np.zeros((1, nv))
             jac[0, self._lift[1]] = 1.0

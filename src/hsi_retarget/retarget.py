@@ -3,8 +3,9 @@ robot :class:`~hsi_retarget.joint_trajectory.JointTrajectory`.
 
 Pipeline: source -> :class:`~hsi_retarget.mapping.HumanMotion` (:mod:`hsi_retarget.sources`) -> robot goals
 (:func:`~hsi_retarget.mapping.map_to_robot`; unreachable goals flagged) -> per-frame differential IK
-(:class:`~hsi_retarget.ik.IKSolver`; the humanoid's feet from
-:func:`~hsi_retarget.humanoid_ik.plan_footsteps`) -> time-parameterization
+(:mod:`hsi_retarget.tracking`, :class:`~hsi_retarget.ik.IKSolver`; the humanoid's feet from
+:func:`~hsi_retarget.humanoid_ik.plan_footsteps`; a fixed-base robot's grasps the IK missed tracked again
+towards arm configurations that reach them, :mod:`hsi_retarget.arm_branch`) -> time-parameterization
 (:func:`~hsi_retarget.timing.time_parameterize`; stretched segments reported). The first frame is solved
 to convergence from the nominal pose; every later frame takes up to ``iterations_per_frame`` steps from the
 previous solution, within ``velocity_factor`` times the joint velocity limits over the source frame period
@@ -20,12 +21,12 @@ from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, TypeAlias, cast
 
 import numpy as np
-import pinocchio as pin
 from numpy.typing import NDArray
 
 from hsi_planning.errors import ConfigError, RetargetError
 from hsi_planning.trajectory import WristTrajectory
-from hsi_retarget.carry_correction import carry_frames, correct_carry, place_carries
+from hsi_retarget.arm_branch import ArmBranchConfig
+from hsi_retarget.carry_correction import place_carries
 from hsi_retarget.finger_room import FingerRoomConfig, make_finger_room
 from hsi_retarget.grasp_depth import GraspDepthConfig, shape_grasps
 from hsi_retarget.grasp_windows import GraspWindow, container_rims, grasp_windows
@@ -36,15 +37,13 @@ from hsi_retarget.grip_turn import (
     object_prims,
     turn_grips,
 )
-from hsi_retarget.human_motion import SIDES, HumanMotion
-from hsi_retarget.humanoid_ik import SupportConfig, plan_footsteps
-from hsi_retarget.ik import IKConfig, IKSolver, IKTargets
+from hsi_retarget.human_motion import HumanMotion
+from hsi_retarget.humanoid_ik import SupportConfig
+from hsi_retarget.ik import IKConfig, IKSolver
 from hsi_retarget.joint_trajectory import ContactEvent, JointTrajectory
 from hsi_retarget.mapping import (
     MappingConfig,
-    RobotGoals,
     map_to_robot,
-    nominal_configuration,
 )
 from hsi_retarget.part_scene import PartPhase, opened_part
 from hsi_retarget.robots import RobotModel
@@ -52,6 +51,7 @@ from hsi_retarget.scene_distance import SceneDistance
 from hsi_retarget.smoothing import keep_clearance, smooth_joints  # noqa: F401 (smooth_joints: API)
 from hsi_retarget.sources import human_motion_from_schedule, human_motion_from_wrists
 from hsi_retarget.timing import TimingConfig, time_parameterize
+from hsi_retarget.tracking import retrack_missed, tcp_errors, track
 
 if TYPE_CHECKING:  # imported lazily: the scheduler package is heavy and not needed for recorded motion
     from hsi_planning.scheduler.schedule import Schedule
@@ -91,6 +91,10 @@ class RetargetConfig:
     #: top-down grasp turns about its approach axis where the fingers have room
     #: (:mod:`hsi_retarget.finger_room`); ``None``: fully open, as planned.
     room: FingerRoomConfig | None = field(default_factory=FingerRoomConfig)
+    #: Fixed-base robots: grasps and releases the IK missed are solved again from other arm configurations,
+    #: and the goals tracked again pulled towards one that reaches (:mod:`hsi_retarget.arm_branch`);
+    #: ``None``: off.
+    arm_branch: ArmBranchConfig | None = field(default_factory=ArmBranchConfig)
     #: Carries re-aimed from the TCP pose reached at their grasp, and onto each object's placement from a
     #: schedule's record of it (:mod:`hsi_retarget.carry_correction`) [-].
     correct_carry: bool = True
@@ -180,116 +184,6 @@ def _runs(mask: NDArray[np.bool_], t: F64, values: F64, side: str) -> list[dict[
     return out
 
 
-def track(
-    goals: RobotGoals,
-    robot: RobotModel,
-    solver: IKSolver,
-    cfg: RetargetConfig,
-    *,
-    part: PartPhase | None = None,
-    events: Sequence[ContactEvent] = (),
-) -> tuple[F64, dict[str, F64], dict[str, F64], dict[str, Any]]:
-    """Frame-by-frame IK of ``goals``: configurations (T, nq), TCP position [m] and orientation [rad] errors
-    per side (T,) (NaN where inactive) and diagnostics (fallbacks, clearance, footsteps; with ``events``
-    the re-aimed ``goals`` and their ``carry_corrections``). ``part``: an opened door or drawer kept clear
-    of while it stands open (:mod:`hsi_retarget.part_scene`). ``events``: contact events in the goals' time
-    [s] whose carries are re-aimed from the TCP pose reached at their grasp as the IK gets there
-    (:func:`~hsi_retarget.carry_correction.correct_carry`)."""
-    n = goals.t.shape[0]
-    feet = plan_footsteps(robot, goals.t, goals.root, cfg.support) if robot.floating else None
-    q = nominal_configuration(robot, goals.root[0], float(goals.lift[0]))
-    qs = np.zeros((n, robot.nq))
-    carries, corrections = carry_frames(goals.t, events), []
-    pos_err = {s: np.full(n, np.nan) for s in goals.tcp}
-    ori_err = {s: np.full(n, np.nan) for s in goals.tcp}
-    fallbacks, min_clear = 0, np.inf
-    tol_p, tol_o = solver.config.position_tolerance, solver.config.orientation_tolerance
-    layer: tuple[SceneDistance | None, str] = (None, "")
-    grippers = robot.gripper_joints
-    fingers = {s: [robot.q_index(j) for j in grippers[s]] for s in goals.finger if s in grippers}
-    for i in range(n):
-        now = (None, "") if part is None else part.at(float(goals.t[i]))
-        if now[0] is not layer[0] or now[1] != layer[1]:
-            layer = now
-            solver.set_part_scene(*layer)
-        for s, idx in fingers.items():  # the fingers are no IK variables: set to their opening
-            if np.isfinite(goals.finger[s][i]):
-                q[idx] = goals.finger[s][i]
-        lift = float(goals.lift[i])
-        root = goals.root[i]
-        if feet is not None and np.isfinite(feet.com[i]).all():  # stepping: pelvis over the stance foot
-            root = np.array(root)
-            root[:2, 3] = feet.com[i]
-            root[2, 3] -= feet.crouch[i]
-        targets = IKTargets(
-            tcp={s: goals.tcp[s][i] for s in goals.tcp if goals.active[s][i]},
-            root=root,
-            lift=lift if np.isfinite(lift) else None,
-            feet={s: feet.feet[s][i] for s in SIDES} if feet is not None else {},
-            support=feet.support[i] if feet is not None else SIDES,
-            com=feet.com[i] if feet is not None and np.isfinite(feet.com[i]).all() else None,
-            contact={s: float(c[i]) for s, c in goals.contact.items() if goals.active[s][i] and c[i] > 0.0},
-            holding=(layer[1],) if layer[1] else (),
-        )
-        errors: tuple[dict[str, float], dict[str, float]] | None = None  # those of q, once measured
-        if i == 0:
-            result = solver.solve(q, targets, cfg.initial_iterations)
-            q, fallbacks = result.q, result.fallbacks
-        else:
-            dt = float(goals.t[i] - goals.t[i - 1]) * cfg.velocity_factor
-            q_start = q
-            for _ in range(cfg.iterations_per_frame):
-                q_prev = q
-                q, info = solver.step(q, targets, dt, q_start)
-                errors = None
-                fallbacks += int(info.fallback > 0)
-                min_clear = min(min_clear, info.min_clearance)
-                if float(np.max(np.abs(q - q_prev))) < cfg.settle_step:  # settled: more steps change ~nothing
-                    break
-                errors = solver.errors(q, targets)
-                if all(errors[0][s] <= tol_p and errors[1][s] <= tol_o for s in errors[0]):
-                    break
-            # a large step can cut into a margin beyond its linearization: push back out on this frame
-            extra = cfg.repair_iterations if info.min_clearance < 0.01 else 0
-            if extra and solver.clearance_bound(q_prev, q, info.min_clearance) > -cfg.repair_depth:
-                extra = 0  # the last step cannot have cut that deep: skip the full clearance query
-            while extra > 0 and solver.clearance(q) < -cfg.repair_depth:
-                q, info = solver.step(q, targets, dt, q_start)
-                errors = None
-                extra -= 1
-        qs[i] = q
-        if i in carries:  # the hand closes here: carry from the pose it reached
-            goals, found, _ = correct_carry(goals, qs, robot, carries[i])
-            corrections += found
-        pe, oe = errors if errors is not None else solver.errors(q, targets)
-        for s in pe:
-            pos_err[s][i], ori_err[s][i] = pe[s], oe[s]
-    solver.set_part_scene(None)
-    diag: dict[str, Any] = {"qp_fallbacks": fallbacks, "min_collision_slack_m": float(min_clear)}
-    if feet is not None:
-        diag["footsteps"] = feet.steps
-    if events:
-        diag["goals"], diag["carry_corrections"] = goals, corrections
-    return qs, pos_err, ori_err, diag
-
-
-def tcp_errors(robot: RobotModel, goals: RobotGoals, qs: F64) -> tuple[dict[str, F64], dict[str, F64]]:
-    """TCP position [m] and orientation [rad] errors (T,) per side of ``qs`` against ``goals`` (NaN where
-    the side's goal is inactive)."""
-    n = goals.t.shape[0]
-    pos = {s: np.full(n, np.nan) for s in goals.tcp}
-    ori = {s: np.full(n, np.nan) for s in goals.tcp}
-    frames = tuple(robot.tcp_frames[s] for s in goals.tcp)
-    for i in range(n):
-        fk = robot.fk(qs[i], frames)
-        for s in goals.tcp:
-            if goals.active[s][i]:
-                pose, goal = fk[robot.tcp_frames[s]], goals.tcp[s][i]
-                pos[s][i] = float(np.linalg.norm(goal[:3, 3] - pose[:3, 3]))
-                ori[s][i] = float(np.linalg.norm(pin.log3(goal[:3, :3] @ pose[:3, :3].T)))
-    return pos, ori
-
-
 def retarget(
     source: Source,
     robot: RobotModel | str,
@@ -335,7 +229,11 @@ def retarget(
         goals, placed = place_carries(goals, motion.events, carry_records)
     t1 = time.perf_counter()
     carried = motion.events if cfg.correct_carry else ()  # re-aimed from the reached grasp poses
-    qs, _, _, diag = track(goals, model, solver, cfg, part=part, events=carried)
+    qs, pos_track, _, diag = track(goals, model, solver, cfg, part=part, events=carried)
+    if not model.floating and windows:  # grasps the IK missed: tracked again from arm configurations
+        qs, diag = retrack_missed(
+            goals, model, solver, cfg, (qs, pos_track, diag), part=part, events=carried, windows=windows
+        )
     goals = diag.pop("goals", goals)
     qs, diag["smoothing_restored_frames"] = keep_clearance(solver, model, goals.t, qs, cfg.smoothing_hz)
     pos_err, ori_err = tcp_errors(model, goals, qs)

@@ -1,0 +1,235 @@
+"""Frame-by-frame IK of robot goals (:func:`track`), and a second pass pulled towards arm configurations
+that reach the grasps and releases the first one missed (:func:`retrack_missed`,
+:mod:`hsi_retarget.arm_branch`).
+
+The first frame is solved to convergence from the nominal pose; every later frame takes up to
+``iterations_per_frame`` steps from the previous solution, within ``velocity_factor`` times the joint
+velocity limits over the frame period (:class:`~hsi_retarget.retarget.RetargetConfig`).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import pinocchio as pin
+from numpy.typing import NDArray
+
+from hsi_retarget.arm_branch import ArmBranch, find_branches, missed_contacts
+from hsi_retarget.carry_correction import carry_frames, correct_carry
+from hsi_retarget.grasp_windows import GraspWindow
+from hsi_retarget.human_motion import SIDES
+from hsi_retarget.humanoid_ik import Footsteps, plan_footsteps
+from hsi_retarget.ik import IKSolver, IKTargets
+from hsi_retarget.joint_trajectory import ContactEvent
+from hsi_retarget.mapping import RobotGoals, nominal_configuration
+from hsi_retarget.part_scene import PartPhase
+from hsi_retarget.robots import RobotModel
+from hsi_retarget.scene_distance import SceneDistance
+
+if TYPE_CHECKING:  # retarget imports this module
+    from hsi_retarget.retarget import RetargetConfig
+
+__all__ = ["frame_targets", "retrack_missed", "tcp_errors", "track"]
+
+_LOG = logging.getLogger(__name__)
+F64 = NDArray[np.float64]
+
+
+def frame_targets(
+    goals: RobotGoals,
+    i: int,
+    feet: Footsteps | None = None,
+    holder: str = "",
+    arm: Sequence[ArmBranch] = (),
+) -> IKTargets:
+    """The IK goals of frame ``i`` of ``goals``: with the humanoid's ``feet``, the hand ``holder``
+    ('' none) holding an opened part, and the ``arm`` configuration tasks weighted at that frame."""
+    lift = float(goals.lift[i])
+    root = goals.root[i]
+    if feet is not None and np.isfinite(feet.com[i]).all():  # stepping: pelvis over the stance foot
+        root = np.array(root)
+        root[:2, 3] = feet.com[i]
+        root[2, 3] -= feet.crouch[i]
+    pulls: dict[str, tuple[F64, float]] = {}
+    for b in arm:
+        if b.weight[i] > pulls.get(b.side, (b.q, 0.0))[1]:
+            pulls[b.side] = (b.q, float(b.weight[i]))
+    return IKTargets(
+        tcp={s: goals.tcp[s][i] for s in goals.tcp if goals.active[s][i]},
+        root=root,
+        lift=lift if np.isfinite(lift) else None,
+        feet={s: feet.feet[s][i] for s in SIDES} if feet is not None else {},
+        support=feet.support[i] if feet is not None else SIDES,
+        com=feet.com[i] if feet is not None and np.isfinite(feet.com[i]).all() else None,
+        contact={s: float(c[i]) for s, c in goals.contact.items() if goals.active[s][i] and c[i] > 0.0},
+        holding=(holder,) if holder else (),
+        arm=pulls,
+    )
+
+
+def track(
+    goals: RobotGoals,
+    robot: RobotModel,
+    solver: IKSolver,
+    cfg: RetargetConfig,
+    *,
+    part: PartPhase | None = None,
+    events: Sequence[ContactEvent] = (),
+    arm: Sequence[ArmBranch] = (),
+) -> tuple[F64, dict[str, F64], dict[str, F64], dict[str, Any]]:
+    """Frame-by-frame IK of ``goals``: configurations (T, nq), TCP position [m] and orientation [rad] errors
+    per side (T,) (NaN where inactive) and diagnostics (fallbacks, clearance, footsteps; with ``events``
+    the re-aimed ``goals`` and their ``carry_corrections``). ``part``: an opened door or drawer kept clear
+    of while it stands open (:mod:`hsi_retarget.part_scene`). ``events``: contact events in the goals' time
+    [s] whose carries are re-aimed from the TCP pose reached at their grasp as the IK gets there
+    (:func:`~hsi_retarget.carry_correction.correct_carry`). ``arm``: arm configuration tasks
+    (:mod:`hsi_retarget.arm_branch`)."""
+    n = goals.t.shape[0]
+    feet = plan_footsteps(robot, goals.t, goals.root, cfg.support) if robot.floating else None
+    q = nominal_configuration(robot, goals.root[0], float(goals.lift[0]))
+    qs = np.zeros((n, robot.nq))
+    carries, corrections = carry_frames(goals.t, events), []
+    pos_err = {s: np.full(n, np.nan) for s in goals.tcp}
+    ori_err = {s: np.full(n, np.nan) for s in goals.tcp}
+    fallbacks, min_clear = 0, np.inf
+    tol_p, tol_o = solver.config.position_tolerance, solver.config.orientation_tolerance
+    layer: tuple[SceneDistance | None, str] = (None, "")
+    grippers = robot.gripper_joints
+    fingers = {s: [robot.q_index(j) for j in grippers[s]] for s in goals.finger if s in grippers}
+    for i in range(n):
+        now = (None, "") if part is None else part.at(float(goals.t[i]))
+        if now[0] is not layer[0] or now[1] != layer[1]:
+            layer = now
+            solver.set_part_scene(*layer)
+        for s, idx in fingers.items():  # the fingers are no IK variables: set to their opening
+            if np.isfinite(goals.finger[s][i]):
+                q[idx] = goals.finger[s][i]
+        targets = frame_targets(goals, i, feet, layer[1], arm)
+        errors: tuple[dict[str, float], dict[str, float]] | None = None  # those of q, once measured
+        if i == 0:
+            result = solver.solve(q, targets, cfg.initial_iterations)
+            q, fallbacks = result.q, result.fallbacks
+        else:
+            dt = float(goals.t[i] - goals.t[i - 1]) * cfg.velocity_factor
+            q_start = q
+            for _ in range(cfg.iterations_per_frame):
+                q_prev = q
+                q, info = solver.step(q, targets, dt, q_start)
+                errors = None
+                fallbacks += int(info.fallback > 0)
+                min_clear = min(min_clear, info.min_clearance)
+                if float(np.max(np.abs(q - q_prev))) < cfg.settle_step:  # settled: more steps change ~nothing
+                    break
+                errors = solver.errors(q, targets)
+                if all(errors[0][s] <= tol_p and errors[1][s] <= tol_o for s in errors[0]):
+                    break
+            # a large step can cut into a margin beyond its linearization: push back out on this frame
+            extra = cfg.repair_iterations if info.min_clearance < 0.01 else 0
+            if extra and solver.clearance_bound(q_prev, q, info.min_clearance) > -cfg.repair_depth:
+                extra = 0  # the last step cannot have cut that deep: skip the full clearance query
+            while extra > 0 and solver.clearance(q) < -cfg.repair_depth:
+                q, info = solver.step(q, targets, dt, q_start)
+                errors = None
+                extra -= 1
+        qs[i] = q
+        if i in carries:  # the hand closes here: carry from the pose it reached
+            goals, found, _ = correct_carry(goals, qs, robot, carries[i])
+            corrections += found
+        pe, oe = errors if errors is not None else solver.errors(q, targets)
+        for s in pe:
+            pos_err[s][i], ori_err[s][i] = pe[s], oe[s]
+    solver.set_part_scene(None)
+    diag: dict[str, Any] = {"qp_fallbacks": fallbacks, "min_collision_slack_m": float(min_clear)}
+    if feet is not None:
+        diag["footsteps"] = feet.steps
+    if events:
+        diag["goals"], diag["carry_corrections"] = goals, corrections
+    return qs, pos_err, ori_err, diag
+
+
+def retrack_missed(
+    goals: RobotGoals,
+    robot: RobotModel,
+    solver: IKSolver,
+    cfg: RetargetConfig,
+    first: tuple[F64, dict[str, F64], dict[str, Any]],
+    *,
+    part: PartPhase | None,
+    events: Sequence[ContactEvent],
+    windows: Sequence[GraspWindow],
+) -> tuple[F64, dict[str, Any]]:
+    """Configurations (T, nq) and diagnostics of ``goals`` tracked again with arm configuration tasks at the
+    grasps and releases of free objects that the ``first`` tracking (configurations, TCP position errors,
+    diagnostics) missed by more than the tolerance (:mod:`hsi_retarget.arm_branch`), when that misses less
+    in total at all those contacts (``windows``); else the first tracking's. ``diag["arm_branches"]``
+    reports the search when there was one."""
+    qs, pos_err, diag = first
+    branch_cfg = cfg.arm_branch
+    missed = [] if branch_cfg is None else missed_contacts(goals.t, windows, pos_err, branch_cfg.tolerance)
+    if branch_cfg is None or not missed:
+        return qs, diag
+    started = time.perf_counter()
+
+    def holder(i: int) -> str:
+        return "" if part is None else part.at(float(goals.t[i]))[1]
+
+    def prepare(i: int) -> None:
+        solver.set_part_scene(*((None, "") if part is None else part.at(float(goals.t[i]))))
+
+    branches = find_branches(
+        goals,
+        robot,
+        solver,
+        missed,
+        lambda i: frame_targets(goals, i, holder=holder(i)),
+        config=branch_cfg,
+        prepare=prepare,
+    )
+    solver.set_part_scene(None)
+    contacts = missed_contacts(goals.t, windows, pos_err, 0.0)  # every free contact, with its error
+    report: dict[str, Any] = {
+        "missed": [
+            {"side": m.side, "time_s": m.time, "error_m": m.error, "target": m.target} for m in missed
+        ],
+        "found": [{"side": b.side, "time_s": b.time, "static_error_m": b.error} for b in branches],
+        "tried_per_contact": branch_cfg.seeds + 1,
+        "kept": False,
+        "contact_error_before_m": sum(m.error for m in contacts),
+    }
+    if branches:
+        qs2, pos2, _, diag2 = track(goals, robot, solver, cfg, part=part, events=events, arm=branches)
+        after = sum(float(np.nan_to_num(pos2[m.side][m.index], nan=m.error)) for m in contacts)
+        report["contact_error_after_m"] = after
+        report["kept"] = after < report["contact_error_before_m"]
+        if report["kept"]:
+            qs, diag = qs2, diag2
+    report["time_s"] = time.perf_counter() - started
+    _LOG.info(
+        "arm branches: %d of %d missed contacts reached by a static solve; tracked again: %s",
+        len(branches),
+        len(missed),
+        "kept" if report["kept"] else "not kept",
+    )
+    diag["arm_branches"] = report
+    return qs, diag
+
+
+def tcp_errors(robot: RobotModel, goals: RobotGoals, qs: F64) -> tuple[dict[str, F64], dict[str, F64]]:
+    """TCP position [m] and orientation [rad] errors (T,) per side of ``qs`` against ``goals`` (NaN where
+    the side's goal is inactive)."""
+    n = goals.t.shape[0]
+    pos = {s: np.full(n, np.nan) for s in goals.tcp}
+    ori = {s: np.full(n, np.nan) for s in goals.tcp}
+    frames = tuple(robot.tcp_frames[s] for s in goals.tcp)
+    for i in range(n):
+        fk = robot.fk(qs[i], frames)
+        for s in goals.tcp:
+            if goals.active[s][i]:
+                pose, goal = fk[robot.tcp_frames[s]], goals.tcp[s][i]
+                pos[s][i] = float(np.linalg.norm(goal[:3, 3] - pose[:3, 3]))
+                ori[s][i] = float(np.linalg.norm(pin.log3(goal[:3, :3] @ pose[:3, :3].T)))
+    return pos, ori

@@ -1,0 +1,136 @@
+"""Arm configurations for missed grasps: the static search finds one that reaches into a shelf compartment
+where the nominal arm pose gets stuck, the IK's arm task pulls to it, the task's weight profile, the
+missed-contact list and config validation."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from hsi_planning.errors import ConfigError
+from hsi_planning.scene import LayoutConfig, generate_layouts
+from hsi_planning.scene_paths import load_scene
+from hsi_retarget.arm_branch import ArmBranchConfig, Missed, _profile, find_branches, missed_contacts
+from hsi_retarget.grasp_windows import GraspWindow
+from hsi_retarget.ik import IKSolver, IKTargets
+from hsi_retarget.mapping import RobotGoals, nominal_configuration
+from hsi_retarget.robots import RobotModel
+from hsi_retarget.scene_distance import SceneDistance
+
+# A grasp of can1 deep in a compartment of the narrow shelf (benchmark case narrow_shelf_can/reshape/3 at
+# 8.6 s of its schedule): TCP goals [m], base pose and torso lift [m] as the mapping gave them.
+_LEFT = np.array([[0.0, 0.0, 1.0, 0.8759], [0.0, 1.0, 0.0, 0.2502], [-1.0, 0.0, 0.0, 0.9725], [0, 0, 0, 1]])
+_RIGHT = np.array(
+    [[0.0, 0.1261, 0.992, 0.372], [0.0, 0.992, -0.1261, -0.1832], [-1.0, 0.0, 0.0, 1.02], [0, 0, 0, 1]]
+)
+_ROOT = np.array([[0.992, 0.1261, 0.0, 0.1493], [-0.1261, 0.992, 0.0, 0.0467], [0, 0, 1, 0], [0, 0, 0, 1]])
+_LIFT = 0.2382
+
+
+@pytest.fixture(scope="module")
+def robot() -> RobotModel:
+    return RobotModel("dual_ur5e")
+
+
+def _goals(n: int = 5) -> RobotGoals:
+    one = np.ones(n, dtype=bool)
+    return RobotGoals(
+        t=np.linspace(0.0, 2.0, n),
+        tcp={"left": np.repeat(_LEFT[None], n, 0), "right": np.repeat(_RIGHT[None], n, 0)},
+        active={"left": one, "right": one},
+        reachable={"left": one, "right": one},
+        reach_excess={"left": np.zeros(n), "right": np.zeros(n)},
+        root=np.repeat(_ROOT[None], n, 0),
+        lift=np.full(n, _LIFT),
+        shoulder={"left": np.zeros((n, 3)), "right": np.zeros((n, 3))},
+        scale=1.0,
+        contact={"left": np.ones(n)},
+    )
+
+
+def test_a_seeded_configuration_reaches_into_the_shelf_where_the_nominal_pose_sticks(
+    robot: RobotModel,
+) -> None:
+    config = LayoutConfig(reshape=True, target="can1")
+    spec = generate_layouts(load_scene("narrow_shelf"), 4, 100007, config)[3]
+    solver = IKSolver(robot, scene=SceneDistance.from_spec(spec, exclude=("can1", "bottle1")))
+    targets = IKTargets(tcp={"left": _LEFT, "right": _RIGHT}, root=_ROOT, lift=_LIFT, contact={"left": 1.0})
+    start = nominal_configuration(robot, _ROOT, _LIFT)
+    stuck = solver.solve(start, targets, 200)
+    assert stuck.position_error["left"] > 0.02  # the arm from its nominal pose stops between the boards
+    goals = _goals()
+    search = ArmBranchConfig(seeds=16)
+    missed = [Missed("left", 4, 2.0, stuck.position_error["left"], "can1")]
+    branches = find_branches(goals, robot, solver, missed, lambda i: targets, config=search)
+    assert len(branches) == 1
+    b = branches[0]
+    assert b.side == "left" and b.error <= search.tolerance
+    reached = solver.solve(b.q, targets, 1)  # one more step from it: still there, clear of the shelf
+    assert reached.position_error["left"] <= search.tolerance
+    assert solver.clearance(b.q) >= search.clearance
+    assert robot.within_limits(b.q)
+    arm = robot.arm_q_indices("left")
+    turnable = (b.q[arm] - 2 * np.pi >= robot.q_lower[arm]) | (b.q[arm] + 2 * np.pi <= robot.q_upper[arm])
+    assert np.all(np.abs(b.q[arm] - start[arm])[turnable] <= np.pi + 1e-9)  # no needless whole turns
+    again = find_branches(goals, robot, solver, missed, lambda i: targets, config=search)
+    np.testing.assert_array_equal(again[0].q, b.q)  # seeded: the same search, the same answer
+    np.testing.assert_allclose(b.weight, search.weight * _profile(goals.t, 2.0, search))
+
+
+def test_no_branch_for_a_goal_out_of_reach(robot: RobotModel) -> None:
+    far = _LEFT.copy()
+    far[:3, 3] = [2.5, 0.25, 1.0]
+    targets = IKTargets(tcp={"left": far}, root=_ROOT, lift=_LIFT, contact={"left": 1.0})
+    solver = IKSolver(robot)
+    missed = [Missed("left", 4, 2.0, 1.5, "can1")]
+    config = ArmBranchConfig(seeds=2, iterations=60)
+    assert find_branches(_goals(), robot, solver, missed, lambda i: targets, config=config) == []
+
+
+def test_the_arm_task_pulls_the_arm_to_its_configuration(robot: RobotModel) -> None:
+    solver = IKSolver(robot)
+    goal_q = np.array(robot.q_home)
+    arm = robot.arm_q_indices("right")
+    goal_q[arm] += np.array([0.3, -0.2, 0.25, -0.3, 0.2, 0.4])
+    root = np.eye(4)
+    free = solver.solve(robot.q_home, IKTargets(root=root, lift=0.225), 50)
+    pulled = solver.solve(robot.q_home, IKTargets(root=root, lift=0.225, arm={"right": (goal_q, 1.0)}), 100)
+    assert np.abs(free.q[arm] - robot.q_home[arm]).max() < 1e-3  # the posture holds it at home
+    np.testing.assert_allclose(pulled.q[arm], goal_q[arm], atol=1e-3)
+    left = robot.arm_q_indices("left")
+    np.testing.assert_allclose(pulled.q[left], robot.q_home[left], atol=1e-3)
+
+
+def test_weight_profile_eases_in_before_and_out_after_the_contact() -> None:
+    cfg = ArmBranchConfig(lead_s=1.5, settle_s=0.5, hold_s=0.3, release_s=0.5)
+    t = np.linspace(0.0, 10.0, 1001)
+    w = _profile(t, 5.0, cfg)
+    assert np.all(w[t <= 3.0] == 0.0) and np.all(w[t >= 5.8] == 0.0)
+    assert np.all(w[(t >= 4.5) & (t <= 5.3)] == 1.0)
+    rising, falling = (t >= 3.0) & (t <= 4.5), (t >= 5.3) & (t <= 5.8)
+    assert np.all(np.diff(w[rising]) >= 0.0) and np.all(np.diff(w[falling]) <= 0.0)
+    assert np.all((w >= 0.0) & (w <= 1.0))
+
+
+def test_missed_contacts_are_the_free_objects_beyond_the_tolerance() -> None:
+    t = np.arange(0.0, 3.0, 0.5)
+    windows = [
+        GraspWindow("left", "grasp", "can1", True, 1.0, (0.5, 1.0), (1.0, 1.5)),
+        GraspWindow("right", "grasp", "cabinet1/door1", False, 1.0, (0.5, 1.0), (1.0, 1.5)),
+        GraspWindow("left", "release", "can1", True, 2.1, (1.5, 2.1), (2.1, 2.5)),
+    ]
+    err = {"left": np.array([0, 0, 0.05, 0, 0.005, 0]), "right": np.full(6, 0.3)}
+    missed = missed_contacts(t, windows, err, 0.01)
+    assert [(m.side, m.index, m.target) for m in missed] == [("left", 2, "can1")]
+    assert missed[0].error == pytest.approx(0.05)
+    err["left"][4] = np.nan  # inactive: not missed
+    assert len(missed_contacts(t, windows, err, 0.001)) == 1
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [("seeds", -1), ("iterations", 0), ("weight", -0.1), ("lead_s", float("nan")), ("tolerance", 0.0)],
+)
+def test_config_rejects_bad_values(field: str, value: float) -> None:
+    with pytest.raises(ConfigError, match="ArmBranchConfig"):
+        ArmBranchConfig(**{field: value})
