@@ -129,7 +129,14 @@ def test_missed_contacts_are_the_free_objects_beyond_the_tolerance() -> None:
 
 @pytest.mark.parametrize(
     ("field", "value"),
-    [("seeds", -1), ("iterations", 0), ("weight", -0.1), ("lead_s", float("nan")), ("tolerance", 0.0)],
+    [
+        ("seeds", -1),
+        ("iterations", 0),
+        ("weight", -0.1),
+        ("lead_s", float("nan")),
+        ("tolerance", 0.0),
+        ("trigger", -0.01),
+    ],
 )
 def test_config_rejects_bad_values(field: str, value: float) -> None:
     with pytest.raises(ConfigError, match="ArmBranchConfig"):

@@ -3,14 +3,14 @@
 The per-frame IK follows the goals from wherever the arm is. In a tight space (a shelf compartment, a
 cabinet) it can get stuck in a configuration that cannot reach the goal (the elbow up against the board
 above) while another configuration can. :func:`missed_contacts` lists the grasps and releases of free
-objects whose tracked TCP ended more than ``tolerance`` from its goal; :func:`find_branches` solves each
+objects whose tracked TCP ended more than ``trigger`` from its goal; :func:`find_branches` solves each
 statically, from the nominal arm pose and from ``seeds`` random configurations of that arm (seeded). The
 solution nearest to the nominal arm pose (its joints shifted by whole turns towards it) that reaches the
-goal without cutting into the collision margins becomes an :class:`ArmBranch`: a joint-space task on that
-arm (:attr:`~hsi_retarget.ik.IKTargets.arm`) at full weight from ``settle_s`` before the contact to
-``hold_s`` after it, eased in over ``lead_s`` before and out over ``release_s`` after.
-:func:`~hsi_retarget.retarget.retarget` then tracks the goals again with these tasks. Fixed-base robots
-only (a humanoid's stance comes from its footstep plan).
+goal within ``tolerance`` without cutting into the collision margins becomes an :class:`ArmBranch`: a
+joint-space task on that arm (:attr:`~hsi_retarget.ik.IKTargets.arm`) at full weight from ``settle_s``
+before the contact to ``hold_s`` after it, eased in over ``lead_s`` before and out over ``release_s``
+after. :func:`~hsi_retarget.retarget.retarget` then tracks the goals again with these tasks. Fixed-base
+robots only (a humanoid's stance comes from its footstep plan).
 """
 
 from __future__ import annotations
@@ -40,13 +40,16 @@ F64 = NDArray[np.float64]
 class ArmBranchConfig:
     """How missed contacts are searched and how strongly the found configuration pulls."""
 
-    seeds: int = 16  #: [-] random arm configurations tried per missed contact (besides the nominal pose)
+    seeds: int = 12  #: [-] random arm configurations tried per missed contact (besides the nominal pose)
     weight: float = 0.05  #: [1/rad^2] weight of the arm configuration task at full strength
     lead_s: float = 1.5  #: [s] the weight eases in over this long before full strength
     settle_s: float = 0.5  #: [s] full strength from this long before the contact
     hold_s: float = 0.3  #: [s] full strength until this long after the contact
     release_s: float = 0.5  #: [s] the weight eases out over this long after that
-    tolerance: float = 0.01  #: [m] TCP miss at a contact that starts a search; a solution reaches within it
+    #: [m] TCP miss at a contact that starts a search: one the grasp cannot survive (a re-tracked approach
+    #: also changes; at 1 cm, 2 cm misses that still grasped were traded for new collisions)
+    trigger: float = 0.03
+    tolerance: float = 0.01  #: [m] a solution reaches the contact within this
     orientation_tolerance: float = 0.1  #: [rad] a solution's largest TCP orientation error
     clearance: float = -0.002  #: [m] a solution's least sphere clearance minus its margin
     iterations: int = 200  #: [-] IK steps of one static solve
@@ -62,8 +65,11 @@ class ArmBranchConfig:
             raise ConfigError(
                 f"ArmBranchConfig.weight and the *_s spans [s] must be finite and >= 0, got {spans}"
             )
-        if not self.tolerance > 0.0 or not self.orientation_tolerance > 0.0:
-            raise ConfigError("ArmBranchConfig.tolerance [m] and orientation_tolerance [rad] must be > 0")
+        if not self.tolerance > 0.0 or not self.orientation_tolerance > 0.0 or not self.trigger > 0.0:
+            raise ConfigError(
+                "ArmBranchConfig.trigger, tolerance [m] and orientation_tolerance [rad] must be > 0, got "
+                f"{self.trigger}, {self.tolerance}, {self.orientation_tolerance}"
+            )
 
 
 @dataclass(frozen=True)

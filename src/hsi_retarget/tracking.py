@@ -164,12 +164,12 @@ def retrack_missed(
 ) -> tuple[F64, dict[str, Any]]:
     """Configurations (T, nq) and diagnostics of ``goals`` tracked again with arm configuration tasks at the
     grasps and releases of free objects that the ``first`` tracking (configurations, TCP position errors,
-    diagnostics) missed by more than the tolerance (:mod:`hsi_retarget.arm_branch`), when that misses less
-    in total at all those contacts (``windows``); else the first tracking's. ``diag["arm_branches"]``
-    reports the search when there was one."""
+    diagnostics) missed by more than the trigger distance (:mod:`hsi_retarget.arm_branch`), when that
+    misses less in total at all those contacts (``windows``); else the first tracking's.
+    ``diag["arm_branches"]`` reports the search when there was one."""
     qs, pos_err, diag = first
     branch_cfg = cfg.arm_branch
-    missed = [] if branch_cfg is None else missed_contacts(goals.t, windows, pos_err, branch_cfg.tolerance)
+    missed = [] if branch_cfg is None else missed_contacts(goals.t, windows, pos_err, branch_cfg.trigger)
     if branch_cfg is None or not missed:
         return qs, diag
     started = time.perf_counter()
