@@ -92,7 +92,6 @@ class ArmBranch:
     q: F64  #: (nq,) the configuration (the other joints as solved with it)
     weight: F64  #: (T,) [1/rad^2] its task weight per frame
     error: float  #: [m] TCP position residual of the static solve
-    tried: int  #: [-] static solves run for it
 
 
 def missed_contacts(
@@ -120,17 +119,14 @@ def find_branches(
     targets_at: Callable[[int], IKTargets],
     *,
     config: ArmBranchConfig | None = None,
-    prepare: Callable[[int], None] | None = None,
 ) -> list[ArmBranch]:
     """An :class:`ArmBranch` for each of ``missed`` that some static solve reaches (see the module
-    docstring). ``targets_at(i)``: the IK goals of frame ``i``; ``prepare(i)``: called before solving
-    frame ``i`` (e.g. to set the opened part's scene)."""
+    docstring). ``targets_at(i)``: the IK goals of frame ``i``, called before its solves (it may also set
+    the solver's scene of that frame, e.g. an opened part)."""
     cfg = config or ArmBranchConfig()
     rng = np.random.default_rng(cfg.seed)
     out = []
     for m in missed:
-        if prepare is not None:
-            prepare(m.index)
         targets = targets_at(m.index)
         iq = robot.arm_q_indices(m.side)
         lo, hi = np.maximum(robot.q_lower[iq], -math.pi), np.minimum(robot.q_upper[iq], math.pi)
@@ -153,7 +149,7 @@ def find_branches(
                 best = (distance, q, res.position_error[m.side])
         if best is not None:
             weight = cfg.weight * _profile(goals.t, m.time, cfg)
-            out.append(ArmBranch(m.side, m.time, best[1], weight, best[2], cfg.seeds + 1))
+            out.append(ArmBranch(m.side, m.time, best[1], weight, best[2]))
     return out
 
 

@@ -204,13 +204,8 @@ class IKSolver:
         if robot.floating:
             self._posture_w[:6] = 0.0
             self._pelvis = robot.model.getFrameId(robot.description.links[0].name, pin.FrameType.BODY)
-        self._arm = {  # side -> arm joints' (q indices, v indices)
-            side: (
-                np.array([robot.q_index(j) for j in names], dtype=np.int64),
-                np.array([robot.v_index(j) for j in names], dtype=np.int64),
-            )
-            for side, names in robot.arm_joints.items()
-        }
+        arms = robot.arm_joints
+        self._arm = {s: (robot.arm_q_indices(s), robot.arm_v_indices(s)) for s in arms}  # (q, v) indices
         self._base_v = [robot.v_index(j) for j in BASE_JOINTS if j in robot.joint_names]
         self._base_q = [robot.q_index(j) for j in BASE_JOINTS if j in robot.joint_names]
         #: [rad] the base yaw's range (a holonomic base turns within it, the long way round if need be)

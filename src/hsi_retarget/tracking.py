@@ -174,21 +174,12 @@ def retrack_missed(
         return qs, diag
     started = time.perf_counter()
 
-    def holder(i: int) -> str:
-        return "" if part is None else part.at(float(goals.t[i]))[1]
+    def targets_at(i: int) -> IKTargets:  # the opened part as the first pass had it at frame i
+        scene, holder = (None, "") if part is None else part.at(float(goals.t[i]))
+        solver.set_part_scene(scene, holder)
+        return frame_targets(goals, i, holder=holder)
 
-    def prepare(i: int) -> None:
-        solver.set_part_scene(*((None, "") if part is None else part.at(float(goals.t[i]))))
-
-    branches = find_branches(
-        goals,
-        robot,
-        solver,
-        missed,
-        lambda i: frame_targets(goals, i, holder=holder(i)),
-        config=branch_cfg,
-        prepare=prepare,
-    )
+    branches = find_branches(goals, robot, solver, missed, targets_at, config=branch_cfg)
     solver.set_part_scene(None)
     contacts = missed_contacts(goals.t, windows, pos_err, 0.0)  # every free contact, with its error
     report: dict[str, Any] = {
