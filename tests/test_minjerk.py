@@ -156,6 +156,18 @@ def test_speed_bound_is_enforced_when_active() -> None:
     assert np.allclose(sol.spline.evaluate([0.0, T]), [a, b], atol=1e-9)
 
 
+def test_budget_stop_keeps_a_feasible_iterate_and_refuses_an_infeasible_one() -> None:
+    # out of wall time at once: the warm start (the free minimum-jerk line) satisfies every constraint
+    a, b, T = np.array([0.1, -0.2, 0.9]), np.array([0.7, 0.1, 1.2]), 1.4
+    sol = solve_min_jerk(a, b, T, (), MinJerkConfig(max_wall_time=1e-6))
+    assert sol.status == "feasible (Maximum_WallTime_Exceeded)"
+    assert np.allclose(sol.spline.evaluate([0.0, T]), [a, b], atol=1e-9)
+    assert np.linalg.norm(sol.spline.evaluate(np.linspace(0.0, T, 300), 1), axis=1).max() <= 1.5 + 1e-3
+    # here the warm start breaks the speed bound (it peaks at 1.70 m/s): no trajectory
+    with pytest.raises(PlanningError, match=r"return status Maximum_WallTime_Exceeded after 0 iterations"):
+        solve_min_jerk(np.zeros(3), np.array([1.0, 0.0, 0.0]), 1.1, (), MinJerkConfig(max_wall_time=1e-6))
+
+
 def test_duration_too_short_for_the_bounds_is_refused() -> None:
     with pytest.raises(PlanningError, match=r"too short.*at least"):
         solve_min_jerk(np.zeros(3), np.array([1.0, 0.0, 0.0]), 0.5, ())

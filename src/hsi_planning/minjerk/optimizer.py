@@ -13,9 +13,10 @@ line. Constraints at ``checks_per_segment`` points per knot interval (ends exclu
 
 IPOPT runs with the exact Hessian (the field is C²), the adaptive barrier update, quietly
 (``print_level 0``, ``sb yes``), bounded by ``max_iterations`` and ``max_wall_time``. A numerical stop
-(``Error_In_Step_Computation``, ``Restoration_Failed``, ``Maximum_Iterations_Exceeded``) on an iterate that
-satisfies every constraint within ``constraint_tolerance`` is kept (status ``feasible (...)``: collision-
-free and within the bounds, its jerk not proven minimal). Any other status, or a result that still
+(``Error_In_Step_Computation``, ``Restoration_Failed``) or a budget stop (``Maximum_Iterations_Exceeded``,
+``Maximum_WallTime_Exceeded``, ``Maximum_CpuTime_Exceeded``: on a loaded machine the wall-time limit comes
+before the iteration limit) on an iterate that satisfies every constraint within ``constraint_tolerance`` is
+kept (status ``feasible (...)``: collision-free and within the bounds, its jerk not proven minimal). Any other status, or a result that still
 violates a clearance by more than ``constraint_tolerance``, raises :class:`PlanningError` naming the
 IPOPT return status.
 """
@@ -48,7 +49,13 @@ _LOG = logging.getLogger(__name__)
 F64 = NDArray[np.float64]
 _SUCCESS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 #: IPOPT stops that can leave a feasible, not yet optimal iterate (kept when every constraint holds).
-_NUMERICAL = ("Error_In_Step_Computation", "Restoration_Failed", "Maximum_Iterations_Exceeded")
+_NUMERICAL = (
+    "Error_In_Step_Computation",
+    "Restoration_Failed",
+    "Maximum_Iterations_Exceeded",
+    "Maximum_WallTime_Exceeded",
+    "Maximum_CpuTime_Exceeded",
+)
 #: [m] knots stay this far inside the field box, so the curve between knots stays inside too.
 _BOX_INSET = 0.03
 
@@ -299,7 +306,7 @@ def solve_min_jerk(
     lo_g, hi_g = np.concatenate(lbg), np.concatenate(ubg)
     violation = float(max(0.0, np.max(lo_g - g, initial=0.0), np.max(g - hi_g, initial=0.0)))
     if status in _NUMERICAL and violation <= cfg.constraint_tolerance:
-        # IPOPT stalled on a feasible iterate (bounds, ends and clearance hold): keep it, say so.
+        # IPOPT stalled or ran out of budget on a feasible iterate (bounds, ends and clearance hold): keep it
         _LOG.info("min-jerk: IPOPT %s after %d iterations on a feasible iterate; kept", status, iters)
         status = f"feasible ({status})"
     elif status not in _SUCCESS:
