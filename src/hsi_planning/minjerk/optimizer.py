@@ -16,9 +16,9 @@ IPOPT runs with the exact Hessian (the field is C²), the adaptive barrier updat
 (``Error_In_Step_Computation``, ``Restoration_Failed``) or a budget stop (``Maximum_Iterations_Exceeded``,
 ``Maximum_WallTime_Exceeded``, ``Maximum_CpuTime_Exceeded``: on a loaded machine the wall-time limit comes
 before the iteration limit) on an iterate that satisfies every constraint within ``constraint_tolerance`` is
-kept (status ``feasible (...)``: collision-free and within the bounds, its jerk not proven minimal). Any other status, or a result that still
-violates a clearance by more than ``constraint_tolerance``, raises :class:`PlanningError` naming the
-IPOPT return status.
+kept (status ``feasible (...)``: collision-free and within the bounds, its jerk not proven minimal). Any
+other status, or a result that still violates a clearance by more than ``constraint_tolerance``, raises
+:class:`PlanningError` naming the IPOPT return status.
 """
 
 from __future__ import annotations
