@@ -42,8 +42,7 @@ from hsi_nodes.demo.tasks import DemoTask
 from hsi_planning.errors import HsiError, RetargetError
 from hsi_planning.perception import CloudConfig, LabelledCloud
 from hsi_planning.planning import Planner
-from hsi_planning.scene import SceneSpec
-from hsi_planning.scene.model import support_surface
+from hsi_planning.scene import SceneSpec, moved_object
 from hsi_planning.scheduler import Schedule
 
 _LOG = logging.getLogger("pick_place")
@@ -86,12 +85,7 @@ def demo_task(case: Case) -> DemoTask:
 
 def moved_spec(spec: SceneSpec, name: str, offset: np.ndarray) -> SceneSpec:
     """``spec`` with object ``name`` shifted by the horizontal world ``offset`` (3,) [m] on its support."""
-    obj = spec.object_by_name(name)
-    rot = support_surface(spec, obj.on).frame[:3, :3]
-    local = rot.T @ np.asarray(offset, dtype=np.float64)
-    new = dataclasses.replace(obj, xy=(obj.xy[0] + float(local[0]), obj.xy[1] + float(local[1])))
-    objects = tuple(new if o.name == name else o for o in spec.objects)
-    return dataclasses.replace(spec, objects=objects)
+    return moved_object(spec, name, offset)
 
 
 def _plan_trajectory(task: DemoTask, spec: SceneSpec, planner: Planner, cfg: PipelineConfig) -> Any:

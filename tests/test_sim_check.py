@@ -17,7 +17,8 @@ import pinocchio as pin
 import pytest
 
 from hsi_planning.errors import ConfigError, MessageError, RetargetError
-from hsi_planning.scene import handle_position
+from hsi_planning.scene import handle_position, moved_object
+from hsi_planning.scene.validate import validate_scene
 from hsi_retarget.gripper_dwell import DwellConfig
 from hsi_retarget.joint_trajectory import ContactEvent, JointTrajectory
 from hsi_retarget.robots import RobotModel
@@ -410,6 +411,22 @@ def test_random_perturbations_are_seeded_and_bounded(world: SimWorld) -> None:
         TargetMove(0.0, "can1", (0.04, 0.04, 0.0))
     with pytest.raises(ConfigError, match="target_shift_m"):
         PerturbationConfig(target_shift_m=0.08)
+
+
+def test_random_target_moves_keep_the_object_clear_of_its_neighbours(world: SimWorld) -> None:
+    # kitchen's box1 stands close to its neighbours: about 1 in 3 directions of a 5 cm move hit one
+    traj = _pick_script(world, "can1", PLACE).build()
+    redrawn = 0
+    for seed in range(20):
+        cfg = PerturbationConfig(seed=seed, pushes=0, target_shift_m=0.05)
+        (move,) = random_perturbations(world, traj, cfg, target="box1")
+        assert isinstance(move, TargetMove) and 0.025 <= move.magnitude <= MAX_TARGET_SHIFT_M
+        validate_scene(moved_object(world.spec, "box1", move.offset))  # raises if it does not fit
+        rng = np.random.default_rng(seed)  # the first draw, as the generator makes it
+        angle, dist = rng.uniform(0.0, 2.0 * math.pi), rng.uniform(0.5, 1.0) * 0.05
+        first = (dist * math.cos(angle), dist * math.sin(angle), 0.0)
+        redrawn += int(not np.allclose(first, move.offset))
+    assert redrawn >= 2
 
 
 def test_moved_target_triggers_replanning_and_the_pick_still_succeeds(world: SimWorld) -> None:

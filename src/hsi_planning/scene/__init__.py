@@ -14,7 +14,7 @@ from hsi_planning.scene.geometry import (
 from hsi_planning.scene.labels import Label, LabelTable, scene_labels
 from hsi_planning.scene.layout import LayoutConfig, generate_layouts
 from hsi_planning.scene.mjcf import build_mjcf, write_mjcf
-from hsi_planning.scene.model import object_pose, support_surface, support_surfaces
+from hsi_planning.scene.model import moved_object, object_pose, support_surface, support_surfaces
 from hsi_planning.scene.reach import ReachConfig, exposing_fraction, target_reachable
 from hsi_planning.scene.spec import CameraSpec, FurnitureSpec, ObjectSpec, SceneSpec, load_scene_spec
 
@@ -35,6 +35,7 @@ __all__ = [
     "generate_layouts",
     "handle_position",
     "load_scene_spec",
+    "moved_object",
     "object_names",
     "object_pose",
     "opening_axis",

@@ -7,10 +7,11 @@ order, then the objects in spec order.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from hsi_planning.errors import SceneError
 from hsi_planning.scene.furniture import SupportSurface, furniture_bodies, furniture_supports
@@ -79,3 +80,15 @@ def scene_bodies(spec: SceneSpec) -> list[BodyPlan]:
     supports = support_surfaces(spec)
     bodies += [object_body(o, supports[o.on]) for o in spec.objects]
     return bodies
+
+
+def moved_object(spec: SceneSpec, name: str, offset: ArrayLike) -> SceneSpec:
+    """``spec`` with object ``name`` shifted on its support by the horizontal world ``offset`` (3,) [m] (its
+    vertical part is dropped: the object stays on its support). Not validated
+    (:func:`~hsi_planning.scene.validate.validate_scene` says whether it still fits)."""
+    obj = spec.object_by_name(name)
+    rot = support_surface(spec, obj.on).frame[:3, :3]
+    shift = np.asarray(offset, dtype=np.float64).reshape(3)
+    local = rot.T @ np.array([shift[0], shift[1], 0.0])
+    new = dataclasses.replace(obj, xy=(obj.xy[0] + float(local[0]), obj.xy[1] + float(local[1])))
+    return dataclasses.replace(spec, objects=tuple(new if o.name == name else o for o in spec.objects))

@@ -4,11 +4,15 @@ A :class:`Push` applies a constant world-frame force (``xfrc_applied``, at the l
 short time: an impulse of ``force * duration``. A :class:`TargetMove` shifts a free object by up to 5 cm
 (horizontally by default) before the robot grasps it. Every event is passed to the caller's re-plan hook
 ``on_perturbation(world, event) -> JointTrajectory | None``; a returned trajectory replaces the rest of the
-current one from that moment (its time 0 = now). :func:`random_perturbations` draws seeded events.
+current one from that moment (its time 0 = now). :func:`random_perturbations` draws seeded events; a target
+move is drawn again (up to :data:`MOVE_DRAWS` times) while it would push the object into a neighbour or off
+its support: a scene no one could set up (MuJoCo would shove the neighbour aside, and a re-plan from the
+moved scene would be refused as invalid).
 """
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -16,12 +20,16 @@ from typing import Any
 
 import numpy as np
 
-from hsi_planning.errors import ConfigError
+from hsi_planning.errors import ConfigError, SceneError
+from hsi_planning.scene import moved_object
+from hsi_planning.scene.validate import validate_scene
 from hsi_retarget.joint_trajectory import JointTrajectory
 from hsi_retarget.sim_check.mjcf import HANDS
 from hsi_retarget.sim_check.world import SimWorld
 
 MAX_TARGET_SHIFT_M = 0.05  #: the largest target move the check models [m]
+MOVE_DRAWS = 32  #: target moves drawn before the move is left out [-]
+_LOG = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -136,10 +144,26 @@ def random_perturbations(
         world.target_kind(target)
         grasps = [e.time for e in trajectory.events if e.kind == "grasp" and e.object_name == target]
         when = config.target_shift_at * (grasps[0] if grasps else 0.0)
-        angle = rng.uniform(0.0, 2.0 * math.pi)
-        dist = rng.uniform(0.5, 1.0) * config.target_shift_m
-        events.append(TargetMove(float(when), target, (dist * math.cos(angle), dist * math.sin(angle), 0.0)))
+        for _ in range(MOVE_DRAWS):
+            angle = rng.uniform(0.0, 2.0 * math.pi)
+            dist = rng.uniform(0.5, 1.0) * config.target_shift_m
+            offset = (dist * math.cos(angle), dist * math.sin(angle), 0.0)
+            if _fits(world, target, offset):
+                events.append(TargetMove(float(when), target, offset))
+                break
+        else:
+            _LOG.warning("no move of %r by %.3f m keeps it clear of its neighbours: left out", target, dist)
     return tuple(sorted(events, key=lambda e: e.time_s))
+
+
+def _fits(world: SimWorld, target: str, offset: tuple[float, float, float]) -> bool:
+    """Whether free object ``target`` moved by ``offset`` [m] still stands on its support, clear of every
+    other object (the world's scene spec validates)."""
+    try:
+        validate_scene(moved_object(world.spec, target, offset))
+    except SceneError:
+        return False
+    return True
 
 
 def event_dict(event: PerturbationEvent) -> dict[str, Any]:
