@@ -7,6 +7,7 @@ not library code): straight TCP segments through IK waypoints, linear in time be
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -427,6 +428,20 @@ def test_random_target_moves_keep_the_object_clear_of_its_neighbours(world: SimW
         first = (dist * math.cos(angle), dist * math.sin(angle), 0.0)
         redrawn += int(not np.allclose(first, move.offset))
     assert redrawn >= 2
+
+
+def test_target_moves_before_the_first_free_object_is_grasped(world: SimWorld) -> None:
+    traj = _pick_script(world, "can1", PLACE).build()
+    can_grasp = next(e.time for e in traj.events if e.kind == "grasp")
+    cfg = PerturbationConfig(seed=1, pushes=0)
+    (alone,) = random_perturbations(world, traj, cfg, target="can1")
+    assert alone.time_s == pytest.approx(cfg.target_shift_at * can_grasp)
+    # a blocker grasped first (here box1, by the other hand): the move comes before it, hands still empty
+    blocker = ContactEvent(0.4 * can_grasp, "right", "grasp", "box1")
+    door = ContactEvent(0.2 * can_grasp, "right", "grasp", "cabinet1/door1")  # a door handle does not count
+    events = tuple(sorted((blocker, door, *traj.events), key=lambda e: e.time))
+    (moved,) = random_perturbations(world, dataclasses.replace(traj, events=events), cfg, target="can1")
+    assert moved.time_s == pytest.approx(cfg.target_shift_at * blocker.time)
 
 
 def test_moved_target_triggers_replanning_and_the_pick_still_succeeds(world: SimWorld) -> None:

@@ -119,8 +119,9 @@ def random_perturbations(
 ) -> tuple[PerturbationEvent, ...]:
     """Seeded pushes over the trajectory and, with ``target`` (a free object), one horizontal target move.
 
-    The move happens at ``target_shift_at`` of the time to the first grasp of ``target`` (at 0 s without one),
-    over a distance uniform in [0.5, 1] x ``target_shift_m``.
+    The move happens at ``target_shift_at`` of the time to the first grasp of a free object (``target``, or a
+    blocker moved out of its way first: the re-plan starts with empty hands; at 0 s without a grasp), over a
+    distance uniform in [0.5, 1] x ``target_shift_m``, in a direction that keeps it clear of its neighbours.
     """
     rng = np.random.default_rng(config.seed)
     bodies = config.push_bodies or arm_links(world)
@@ -142,8 +143,12 @@ def random_perturbations(
         )
     if target and config.target_shift_m > 0.0:
         world.target_kind(target)
-        grasps = [e.time for e in trajectory.events if e.kind == "grasp" and e.object_name == target]
-        when = config.target_shift_at * (grasps[0] if grasps else 0.0)
+        grasps = [
+            e.time
+            for e in trajectory.events
+            if e.kind == "grasp" and e.object_name in world.object_qpos  # free objects, not doors/drawers
+        ]
+        when = config.target_shift_at * min(grasps, default=0.0)
         for _ in range(MOVE_DRAWS):
             angle = rng.uniform(0.0, 2.0 * math.pi)
             dist = rng.uniform(0.5, 1.0) * config.target_shift_m
