@@ -83,11 +83,6 @@ def demo_task(case: Case) -> DemoTask:
     )
 
 
-def moved_spec(spec: SceneSpec, name: str, offset: np.ndarray) -> SceneSpec:
-    """``spec`` with object ``name`` shifted by the horizontal world ``offset`` (3,) [m] on its support."""
-    return moved_object(spec, name, offset)
-
-
 def _plan_trajectory(task: DemoTask, spec: SceneSpec, planner: Planner, cfg: PipelineConfig) -> Any:
     """The pipeline's stages up to the joint trajectory: resolve, schedule, then
     :func:`~hsi_nodes.demo.pipeline.robot_trajectory` (retarget with grasp depth, gripper dwell)."""
@@ -166,7 +161,7 @@ def perturbed_execution(
             return None
         t0 = time.perf_counter()
         try:
-            spec = moved_spec(case.spec, event.object_name, np.asarray(event.offset))
+            spec = moved_object(case.spec, event.object_name, event.offset)
             new = _plan_trajectory(dataclasses.replace(task, hand=roles["hand"]), spec, planner, cfg)
             t_now = world.time - start
             joined = join(new, world.robot_q(), t_now, world)

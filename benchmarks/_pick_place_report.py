@@ -173,7 +173,8 @@ def markdown(results: dict[str, Any]) -> str:
         "(otherwise it stopped at resolve/schedule/retarget). Medians of placement error, duration and",
         "tracking error and the collision columns are over executed episodes. IK [ms/frame]: median over",
         "episodes of the retargeting's IK time per frame; IK [frames/s]: all frames / all IK time.",
-        "Perturbed: 2 pushes (40–120 N, 0.1 s) on arm links and the target moved 2.5–5 cm before its grasp,",
+        "Perturbed: 2 pushes (40–120 N, 0.1 s) on arm links and the target moved 2.5–5 cm (clear of its",
+        "neighbours, on its support) before the first grasp of a free object (the target or a blocker),",
         "followed by re-planning (benchmarks/_pick_place_episode.py).",
         "",
     ]
