@@ -49,7 +49,7 @@ _LOG = logging.getLogger(__name__)
 F64 = NDArray[np.float64]
 _SUCCESS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 #: IPOPT stops that can leave a feasible, not yet optimal iterate (kept when every constraint holds).
-_NUMERICAL = (
+_KEEP_IF_FEASIBLE = (
     "Error_In_Step_Computation",
     "Restoration_Failed",
     "Maximum_Iterations_Exceeded",
@@ -305,7 +305,7 @@ def solve_min_jerk(
     g = np.asarray(result["g"], dtype=np.float64).reshape(-1)
     lo_g, hi_g = np.concatenate(lbg), np.concatenate(ubg)
     violation = float(max(0.0, np.max(lo_g - g, initial=0.0), np.max(g - hi_g, initial=0.0)))
-    if status in _NUMERICAL and violation <= cfg.constraint_tolerance:
+    if status in _KEEP_IF_FEASIBLE and violation <= cfg.constraint_tolerance:
         # IPOPT stalled or ran out of budget on a feasible iterate (bounds, ends and clearance hold): keep it
         _LOG.info("min-jerk: IPOPT %s after %d iterations on a feasible iterate; kept", status, iters)
         status = f"feasible ({status})"

@@ -146,7 +146,7 @@ def random_perturbations(
         grasps = [
             e.time
             for e in trajectory.events
-            if e.kind == "grasp" and e.object_name in world.object_qpos  # free objects, not doors/drawers
+            if e.kind == "grasp" and e.object_name in world.objects  # free objects, not doors/drawers
         ]
         when = config.target_shift_at * min(grasps, default=0.0)
         for _ in range(MOVE_DRAWS):
