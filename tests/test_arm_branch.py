@@ -1,6 +1,6 @@
 """Arm configurations for missed grasps: the static search finds one that reaches into a shelf compartment
 where the nominal arm pose gets stuck, the IK's arm task pulls to it, the task's weight profile, the
-missed-contact list and config validation."""
+missed-contact list, the second tracking resumed where the arm task starts, and config validation."""
 
 from __future__ import annotations
 
@@ -10,12 +10,22 @@ import pytest
 from hsi_planning.errors import ConfigError
 from hsi_planning.scene import LayoutConfig, generate_layouts
 from hsi_planning.scene_paths import load_scene
-from hsi_retarget.arm_branch import ArmBranchConfig, Missed, _profile, find_branches, missed_contacts
+from hsi_retarget.arm_branch import (
+    ArmBranch,
+    ArmBranchConfig,
+    Missed,
+    _profile,
+    find_branches,
+    missed_contacts,
+)
 from hsi_retarget.grasp_windows import GraspWindow
 from hsi_retarget.ik import IKSolver, IKTargets
+from hsi_retarget.joint_trajectory import ContactEvent
 from hsi_retarget.mapping import RobotGoals, nominal_configuration
+from hsi_retarget.retarget import RetargetConfig
 from hsi_retarget.robots import RobotModel
 from hsi_retarget.scene_distance import SceneDistance
+from hsi_retarget.tracking import track
 
 # A grasp of can1 deep in a compartment of the narrow shelf (benchmark case narrow_shelf_can/reshape/3 at
 # 8.6 s of its schedule): TCP goals [m], base pose and torso lift [m] as the mapping gave them.
@@ -99,6 +109,39 @@ def test_the_arm_task_pulls_the_arm_to_its_configuration(robot: RobotModel) -> N
     np.testing.assert_allclose(pulled.q[arm], goal_q[arm], atol=1e-3)
     left = robot.arm_q_indices("left")
     np.testing.assert_allclose(pulled.q[left], robot.q_home[left], atol=1e-3)
+
+
+def test_a_second_tracking_resumed_where_the_arm_task_starts_is_the_full_one(robot: RobotModel) -> None:
+    """The frames before the arm task weighs in have the first pass's targets: resumed from the first
+    pass's trace there, the second pass is bitwise the full second pass (carry re-aimed on the way)."""
+    n = 90
+    goals = _goals(n)
+    t = goals.t
+    right = np.repeat(np.eye(4)[None], n, 0)
+    right[:, :3, :3] = _RIGHT[:3, :3]
+    right[:, :3, 3] = np.column_stack([0.45 + 0.1 * np.sin(t), -0.25 + 0.1 * t, 1.0 + 0.05 * np.cos(2 * t)])
+    left = np.repeat(_LEFT[None], n, 0)
+    left[:, 0, 3] = 0.55
+    goals = RobotGoals(**{**goals.__dict__, "tcp": {"left": left, "right": right}, "contact": {}})
+    events = (ContactEvent(0.5, "right", "grasp", "box1"), ContactEvent(1.5, "right", "release", "box1"))
+    solver, cfg = IKSolver(robot), RetargetConfig()
+    first = track(goals, robot, solver, cfg, events=events, trace=True)
+    trace = first[3]["trace"]
+    goal_q = np.array(first[0][60])
+    goal_q[robot.arm_q_indices("left")] += 0.2
+    weight = np.where(np.arange(n) >= 50, 0.05, 0.0)
+    arm = [ArmBranch("left", float(t[70]), goal_q, weight, 0.0)]
+    full = track(goals, robot, solver, cfg, events=events, arm=arm)
+    resumed = track(goals, robot, solver, cfg, events=events, arm=arm, resume=(50, trace))
+    np.testing.assert_array_equal(resumed[0], full[0])
+    assert not np.array_equal(full[0][50:], first[0][50:])  # the arm task changed the frames from 50
+    np.testing.assert_array_equal(full[0][:50], first[0][:50])
+    for s in ("left", "right"):
+        np.testing.assert_array_equal(resumed[1][s], full[1][s])
+    for key in ("qp_fallbacks", "min_collision_slack_m", "carry_corrections"):
+        assert resumed[3][key] == full[3][key]
+    np.testing.assert_array_equal(resumed[3]["goals"].tcp["right"], full[3]["goals"].tcp["right"])
+    assert full[3]["carry_corrections"]  # the carry was re-aimed before frame 50: the resume takes that
 
 
 def test_weight_profile_eases_in_before_and_out_after_the_contact() -> None:

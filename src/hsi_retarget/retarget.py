@@ -73,6 +73,11 @@ class RetargetConfig:
     iterations_per_frame: int = 3  #: [-] IK steps per frame after the first
     #: [rad] or [m] a frame's IK stops after a step that changed no coordinate more than this (0: never)
     settle_step: float = 1e-3
+    #: [m] away from contacts, a frame's IK also stops after a step that leaves every TCP position error
+    #: within this of the previous frame's (its first step) or improves it by less than this (a later step):
+    #: the residual of the weighted tasks, which more steps would not remove (0: never)
+    settle_position: float = 5e-4
+    settle_orientation: float = 5e-3  #: [rad] the same for the TCP orientation errors
     initial_iterations: int = 200  #: [-] IK steps to converge on the first frame
     velocity_factor: float = 3.0  #: [-] per-frame step bound, multiple of v_max x frame period
     smoothing_hz: float = 8.0  #: [Hz] low-pass of a fixed-base robot's arm/base/lift joints; 0: none
@@ -107,6 +112,11 @@ class RetargetConfig:
             )
         if not 0.0 <= self.settle_step < 0.05:
             raise ConfigError(f"RetargetConfig.settle_step must be in [0, 0.05), got {self.settle_step}")
+        if not (self.settle_position >= 0.0 and self.settle_orientation >= 0.0):
+            raise ConfigError(
+                "RetargetConfig.settle_position [m] and settle_orientation [rad] must be >= 0, got "
+                f"{self.settle_position}, {self.settle_orientation}"
+            )
         if not 0.0 <= self.repair_depth < 0.1:
             raise ConfigError(f"RetargetConfig.repair_depth must be in [0, 0.1) m, got {self.repair_depth}")
         if not self.smoothing_hz >= 0.0:
@@ -229,8 +239,9 @@ def retarget(
         goals, placed = place_carries(goals, motion.events, carry_records)
     t1 = time.perf_counter()
     carried = motion.events if cfg.correct_carry else ()  # re-aimed from the reached grasp poses
-    qs, pos_track, _, diag = track(goals, model, solver, cfg, part=part, events=carried)
-    if not model.floating and windows:  # grasps the IK missed: tracked again from arm configurations
+    retrack = not model.floating and bool(windows)
+    qs, pos_track, _, diag = track(goals, model, solver, cfg, part=part, events=carried, trace=retrack)
+    if retrack:  # grasps the IK missed: tracked again from arm configurations
         qs, diag = retrack_missed(
             goals, model, solver, cfg, (qs, pos_track, diag), part=part, events=carried, windows=windows
         )

@@ -12,6 +12,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -37,6 +38,19 @@ __all__ = ["frame_targets", "retrack_missed", "tcp_errors", "track"]
 
 _LOG = logging.getLogger(__name__)
 F64 = NDArray[np.float64]
+
+
+@dataclass(frozen=True, eq=False)
+class Trace:
+    """Per-frame state of a :func:`track` pass, for a second pass that differs only from some frame on."""
+
+    qs: F64  #: (T, nq) configurations
+    pos_err: dict[str, F64]  #: side -> (T,) [m] TCP position errors (NaN where inactive)
+    ori_err: dict[str, F64]  #: side -> (T,) [rad] TCP orientation errors (NaN where inactive)
+    fallbacks: NDArray[np.int64]  #: (T,) [-] QP fallbacks through each frame
+    clearance: F64  #: (T,) [m] least collision slack through each frame
+    #: (frame, goals after it, corrections so far) for each carry re-aimed at that frame
+    versions: list[tuple[int, RobotGoals, list[dict[str, Any]]]]
 
 
 def frame_targets(
@@ -80,6 +94,8 @@ def track(
     part: PartPhase | None = None,
     events: Sequence[ContactEvent] = (),
     arm: Sequence[ArmBranch] = (),
+    trace: bool = False,
+    resume: tuple[int, Trace] | None = None,
 ) -> tuple[F64, dict[str, F64], dict[str, F64], dict[str, Any]]:
     """Frame-by-frame IK of ``goals``: configurations (T, nq), TCP position [m] and orientation [rad] errors
     per side (T,) (NaN where inactive) and diagnostics (fallbacks, clearance, footsteps; with ``events``
@@ -87,7 +103,9 @@ def track(
     of while it stands open (:mod:`hsi_retarget.part_scene`). ``events``: contact events in the goals' time
     [s] whose carries are re-aimed from the TCP pose reached at their grasp as the IK gets there
     (:func:`~hsi_retarget.carry_correction.correct_carry`). ``arm``: arm configuration tasks
-    (:mod:`hsi_retarget.arm_branch`)."""
+    (:mod:`hsi_retarget.arm_branch`). With ``trace`` ``diag["trace"]`` keeps the per-frame state
+    (:class:`Trace`); ``resume`` = (frame k, a trace of these goals without ``arm``) takes frames before k
+    from it (the targets there are the same) and tracks on from k."""
     n = goals.t.shape[0]
     feet = plan_footsteps(robot, goals.t, goals.root, cfg.support) if robot.floating else None
     q = nominal_configuration(robot, goals.root[0], float(goals.lift[0]))
@@ -96,11 +114,31 @@ def track(
     pos_err = {s: np.full(n, np.nan) for s in goals.tcp}
     ori_err = {s: np.full(n, np.nan) for s in goals.tcp}
     fallbacks, min_clear = 0, np.inf
+    fallbacks_to, clear_to = np.zeros(n, dtype=np.int64), np.full(n, np.inf)  # through each frame
+    versions: list[tuple[int, RobotGoals, list[dict[str, Any]]]] = []  # goals after each carry correction
     tol_p, tol_o = solver.config.position_tolerance, solver.config.orientation_tolerance
     layer: tuple[SceneDistance | None, str] = (None, "")
     grippers = robot.gripper_joints
     fingers = {s: [robot.q_index(j) for j in grippers[s]] for s in goals.finger if s in grippers}
-    for i in range(n):
+    settle = (cfg.settle_position, cfg.settle_orientation)
+    before: tuple[dict[str, float], dict[str, float]] | None = None  # the last errors measured
+    start = 0
+    if resume is not None and resume[0] > 0:
+        start, old = resume
+        q, qs[:start] = old.qs[start - 1].copy(), old.qs[:start]
+        for s in goals.tcp:
+            pos_err[s][:start], ori_err[s][:start] = old.pos_err[s][:start], old.ori_err[s][:start]
+        fallbacks, min_clear = int(old.fallbacks[start - 1]), float(old.clearance[start - 1])
+        fallbacks_to[:start], clear_to[:start] = old.fallbacks[:start], old.clearance[:start]
+        versions = [v for v in old.versions if v[0] < start]
+        if versions:
+            goals, corrections = versions[-1][1], list(versions[-1][2])
+        was = {s for s in goals.tcp if np.isfinite(old.pos_err[s][start - 1])}
+        before = (
+            {s: float(old.pos_err[s][start - 1]) for s in was},
+            {s: float(old.ori_err[s][start - 1]) for s in was},
+        )
+    for i in range(start, n):
         now = (None, "") if part is None else part.at(float(goals.t[i]))
         if now[0] is not layer[0] or now[1] != layer[1]:
             layer = now
@@ -116,7 +154,7 @@ def track(
         else:
             dt = float(goals.t[i] - goals.t[i - 1]) * cfg.velocity_factor
             q_start = q
-            for _ in range(cfg.iterations_per_frame):
+            for step in range(cfg.iterations_per_frame):
                 q_prev = q
                 q, info = solver.step(q, targets, dt, q_start)
                 errors = None
@@ -127,6 +165,9 @@ def track(
                 errors = solver.errors(q, targets)
                 if all(errors[0][s] <= tol_p and errors[1][s] <= tol_o for s in errors[0]):
                     break
+                if _residual(errors, before, first=step == 0, settle=settle, contact=targets.contact):
+                    break
+                before = errors
             # a large step can cut into a margin beyond its linearization: push back out on this frame
             extra = cfg.repair_iterations if info.min_clearance < 0.01 else 0
             if extra and solver.clearance_bound(q_prev, q, info.min_clearance) > -cfg.repair_depth:
@@ -139,16 +180,46 @@ def track(
         if i in carries:  # the hand closes here: carry from the pose it reached
             goals, found, _ = correct_carry(goals, qs, robot, carries[i])
             corrections += found
+            versions.append((i, goals, list(corrections)))
         pe, oe = errors if errors is not None else solver.errors(q, targets)
+        before = (pe, oe)
         for s in pe:
             pos_err[s][i], ori_err[s][i] = pe[s], oe[s]
+        fallbacks_to[i], clear_to[i] = fallbacks, min_clear
     solver.set_part_scene(None)
     diag: dict[str, Any] = {"qp_fallbacks": fallbacks, "min_collision_slack_m": float(min_clear)}
     if feet is not None:
         diag["footsteps"] = feet.steps
     if events:
         diag["goals"], diag["carry_corrections"] = goals, corrections
+    if trace:
+        diag["trace"] = Trace(qs, pos_err, ori_err, fallbacks_to, clear_to, versions)
     return qs, pos_err, ori_err, diag
+
+
+def _residual(
+    errors: tuple[dict[str, float], dict[str, float]],
+    before: tuple[dict[str, float], dict[str, float]] | None,
+    *,
+    first: bool,
+    settle: tuple[float, float],
+    contact: dict[str, float],
+) -> bool:
+    """Whether the TCP position [m] and orientation [rad] ``errors`` per side are the tasks' residual: after
+    a frame's ``first`` step, within ``settle`` (position [m], orientation [rad]) of the previous frame's
+    (``before``), else improved by less than that over the last step (``before``). A side's ``settle``
+    shrinks with its ``contact`` closeness [0..1]: at a contact its errors may not grow from frame to frame
+    at all. Never with ``settle`` zero, without ``before`` or when the sides differ."""
+    if before is None or not (settle[0] > 0.0 or settle[1] > 0.0) or errors[0].keys() != before[0].keys():
+        return False
+    pairs = [
+        (now[k], was[k], s * (1.0 - contact.get(k, 0.0)))
+        for now, was, s in zip(errors, before, settle, strict=True)
+        for k in now
+    ]
+    if first:  # no worse than the last frame's residual
+        return all(e <= b + s for e, b, s in pairs)
+    return all(e >= b - s for e, b, s in pairs)  # a step that barely helped
 
 
 def retrack_missed(
@@ -168,11 +239,12 @@ def retrack_missed(
     misses less in total at all those contacts (``windows``); else the first tracking's.
     ``diag["arm_branches"]`` reports the search when there was one."""
     qs, pos_err, diag = first
+    trace = diag.pop("trace", None)
     branch_cfg = cfg.arm_branch
     missed = [] if branch_cfg is None else missed_contacts(goals.t, windows, pos_err, branch_cfg.trigger)
     if branch_cfg is None or not missed:
         return qs, diag
-    started = time.perf_counter()
+    started, n = time.perf_counter(), goals.t.shape[0]
 
     def targets_at(i: int) -> IKTargets:  # the opened part as the first pass had it at frame i
         scene, holder = (None, "") if part is None else part.at(float(goals.t[i]))
@@ -192,7 +264,12 @@ def retrack_missed(
         "contact_error_before_m": sum(m.error for m in contacts),
     }
     if branches:
-        qs2, pos2, _, diag2 = track(goals, robot, solver, cfg, part=part, events=events, arm=branches)
+        # the targets differ from the first frame that an arm task weighs on: track on from there
+        start = min(int(np.argmax(b.weight > 0.0)) if (b.weight > 0.0).any() else n for b in branches)
+        resume = (start, trace) if isinstance(trace, Trace) and start < n else None
+        qs2, pos2, _, diag2 = track(
+            goals, robot, solver, cfg, part=part, events=events, arm=branches, resume=resume
+        )
         after = sum(float(np.nan_to_num(pos2[m.side][m.index], nan=m.error)) for m in contacts)
         report["contact_error_after_m"] = after
         report["kept"] = after < report["contact_error_before_m"]
