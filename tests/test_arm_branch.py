@@ -97,6 +97,26 @@ def test_no_branch_for_a_goal_out_of_reach(robot: RobotModel) -> None:
     assert find_branches(_goals(), robot, solver, missed, lambda i: targets, config=config) == []
 
 
+def test_a_static_solve_stops_once_its_error_stalls(robot: RobotModel) -> None:
+    """Out of reach the error stops falling long before the step limit: the stall rule ends the solve
+    there; a reachable goal is still reached."""
+    far = _LEFT.copy()
+    far[:3, 3] = [2.5, 0.25, 1.0]
+    solver = IKSolver(robot)
+    start = nominal_configuration(robot, _ROOT, _LIFT)
+    stuck = IKTargets(tcp={"left": far}, root=_ROOT, lift=_LIFT, contact={"left": 1.0})
+    full = solver.solve(start, stuck, 200)
+    stalled = solver.solve(start, stuck, 200, stall=(20, 1e-3))
+    assert full.iterations == 200 and stalled.iterations < 100
+    assert stalled.position_error["left"] < full.position_error["left"] + 1e-3
+    near = _RIGHT.copy()
+    near[:3, 3] = [0.45, -0.3, 0.95]
+    reach = IKTargets(tcp={"right": near}, root=_ROOT, lift=_LIFT, contact={"right": 1.0})
+    assert solver.solve(start, reach, 200, stall=(20, 1e-3)).position_error["right"] < 1e-3
+    with pytest.raises(ConfigError, match="stall_steps"):
+        ArmBranchConfig(stall_steps=0)
+
+
 def test_the_arm_task_pulls_the_arm_to_its_configuration(robot: RobotModel) -> None:
     solver = IKSolver(robot)
     goal_q = np.array(robot.q_home)

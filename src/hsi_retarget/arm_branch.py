@@ -53,12 +53,17 @@ class ArmBranchConfig:
     orientation_tolerance: float = 0.1  #: [rad] a solution's largest TCP orientation error
     clearance: float = -0.002  #: [m] a solution's least sphere clearance minus its margin
     iterations: int = 200  #: [-] IK steps of one static solve
+    #: [-] a static solve also stops once its TCP position error fell less than ``stall_progress`` over
+    #: this many steps (stuck short of the goal against a board, or creeping in well within ``tolerance``)
+    stall_steps: int = 20
+    stall_progress: float = 0.001  #: [m] see ``stall_steps``
     seed: int = 0  #: [-] random generator seed
 
     def __post_init__(self) -> None:
-        if self.seeds < 0 or self.iterations < 1:
+        if self.seeds < 0 or self.iterations < 1 or self.stall_steps < 1 or not self.stall_progress >= 0.0:
             raise ConfigError(
-                f"ArmBranchConfig.seeds must be >= 0 and iterations >= 1, got {self.seeds}, {self.iterations}"
+                "ArmBranchConfig.seeds must be >= 0, iterations and stall_steps >= 1, stall_progress >= 0 m, "
+                f"got {self.seeds}, {self.iterations}, {self.stall_steps}, {self.stall_progress}"
             )
         spans = (self.weight, self.lead_s, self.settle_s, self.hold_s, self.release_s)
         if not all(math.isfinite(v) and v >= 0.0 for v in spans):
@@ -136,7 +141,7 @@ def find_branches(
             q0 = start.copy()
             if k > 0:
                 q0[iq] = rng.uniform(lo, hi)
-            res = solver.solve(q0, targets, cfg.iterations)
+            res = solver.solve(q0, targets, cfg.iterations, stall=(cfg.stall_steps, cfg.stall_progress))
             if (
                 res.position_error.get(m.side, math.inf) > cfg.tolerance
                 or res.orientation_error.get(m.side, math.inf) > cfg.orientation_tolerance

@@ -457,12 +457,20 @@ class IKSolver:
         return pos, ori
 
     def solve(
-        self, q0: F64, targets: IKTargets, iterations: int | None = None, dt: float | None = None
+        self,
+        q0: F64,
+        targets: IKTargets,
+        iterations: int | None = None,
+        dt: float | None = None,
+        stall: tuple[int, float] | None = None,
     ) -> IKResult:
-        """Step from ``q0`` until the TCP errors are within tolerance, the steps stall, or ``iterations``."""
+        """Step from ``q0`` until the TCP errors are within tolerance, the steps stall, or ``iterations``.
+        ``stall`` = (steps n, progress [m]): also stop once the largest TCP position error is less than
+        ``progress`` below what it was n steps before (stuck against a constraint, or close enough)."""
         cfg = self.config
         q = np.array(q0, dtype=np.float64)
         fallbacks, done, it = 0, False, 0
+        worst: list[float] = []  # the largest TCP position error after each step
         for step in range(1, (iterations or cfg.iterations) + 1):
             it = step
             q_new, info = self.step(q, targets, dt)
@@ -474,6 +482,9 @@ class IKSolver:
                 pos[s] <= cfg.position_tolerance and ori[s] <= cfg.orientation_tolerance for s in pos
             )
             if done or moved < 1e-7:
+                break
+            worst.append(max(pos.values(), default=0.0))
+            if stall is not None and len(worst) > stall[0] and worst[-1 - stall[0]] - worst[-1] < stall[1]:
                 break
         pos, ori = self.errors(q, targets)
         return IKResult(q, pos, ori, it, done, fallbacks)
