@@ -73,9 +73,9 @@ class RetargetConfig:
     iterations_per_frame: int = 3  #: [-] IK steps per frame after the first
     #: [rad] or [m] a frame's IK stops after a step that changed no coordinate more than this (0: never)
     settle_step: float = 1e-3
-    #: [m] away from contacts, a frame's IK also stops after a step that leaves every TCP position error
-    #: within this of the previous frame's (its first step) or improves it by less than this (a later step):
-    #: the residual of the weighted tasks, which more steps would not remove (0: never)
+    #: [m] a frame's IK also stops after a step that leaves every TCP position error within this of the
+    #: previous frame's (its first step) or improves it by less than this (a later step): the residual of
+    #: the weighted tasks, which more steps would not remove; it shrinks to 0 at a contact (0: never)
     settle_position: float = 5e-4
     settle_orientation: float = 5e-3  #: [rad] the same for the TCP orientation errors
     initial_iterations: int = 200  #: [-] IK steps to converge on the first frame

@@ -4,7 +4,9 @@ that reach the grasps and releases the first one missed (:func:`retrack_missed`,
 
 The first frame is solved to convergence from the nominal pose; every later frame takes up to
 ``iterations_per_frame`` steps from the previous solution, within ``velocity_factor`` times the joint
-velocity limits over the frame period (:class:`~hsi_retarget.retarget.RetargetConfig`).
+velocity limits over the frame period (:class:`~hsi_retarget.retarget.RetargetConfig`), and stops early
+once its TCP errors sit at the weighted tasks' residual (``settle_position``/``settle_orientation``). The
+second pass starts where its arm tasks first weigh in, from the first pass's :class:`Trace`.
 """
 
 from __future__ import annotations
