@@ -4,6 +4,8 @@ missed-contact list, the second tracking resumed where the arm task starts, and 
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -142,7 +144,7 @@ def test_a_second_tracking_resumed_where_the_arm_task_starts_is_the_full_one(rob
     right[:, :3, 3] = np.column_stack([0.45 + 0.1 * np.sin(t), -0.25 + 0.1 * t, 1.0 + 0.05 * np.cos(2 * t)])
     left = np.repeat(_LEFT[None], n, 0)
     left[:, 0, 3] = 0.55
-    goals = RobotGoals(**{**goals.__dict__, "tcp": {"left": left, "right": right}, "contact": {}})
+    goals = dataclasses.replace(goals, tcp={"left": left, "right": right}, contact={})
     events = (ContactEvent(0.5, "right", "grasp", "box1"), ContactEvent(1.5, "right", "release", "box1"))
     solver, cfg = IKSolver(robot), RetargetConfig()
     first = track(goals, robot, solver, cfg, events=events, trace=True)

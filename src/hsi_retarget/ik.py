@@ -466,11 +466,13 @@ class IKSolver:
     ) -> IKResult:
         """Step from ``q0`` until the TCP errors are within tolerance, the steps stall, or ``iterations``.
         ``stall`` = (steps n, progress [m]): also stop once the largest TCP position error is less than
-        ``progress`` below what it was n steps before (stuck against a constraint, or close enough)."""
+        ``progress`` below what it was n steps before (stuck against a constraint, or close enough); only
+        with TCP goals."""
         cfg = self.config
         q = np.array(q0, dtype=np.float64)
         fallbacks, done, it = 0, False, 0
         worst: list[float] = []  # the largest TCP position error after each step
+        stall = stall if targets.tcp else None  # without TCP goals there is no error to watch
         for step in range(1, (iterations or cfg.iterations) + 1):
             it = step
             q_new, info = self.step(q, targets, dt)
@@ -483,8 +485,9 @@ class IKSolver:
             )
             if done or moved < 1e-7:
                 break
-            worst.append(max(pos.values(), default=0.0))
-            if stall is not None and len(worst) > stall[0] and worst[-1 - stall[0]] - worst[-1] < stall[1]:
-                break
+            if stall is not None:
+                worst.append(max(pos.values()))
+                if len(worst) > stall[0] and worst[-1 - stall[0]] - worst[-1] < stall[1]:
+                    break
         pos, ori = self.errors(q, targets)
         return IKResult(q, pos, ori, it, done, fallbacks)
