@@ -339,6 +339,36 @@ def test_aside_spots_keep_a_top_down_take_out_free_without_excluding_everything(
     assert all(not ((p[0] - start[0]) * -1.0 > -0.05 and abs(p[1] - start[1]) < 0.05) for _, p in strip)
 
 
+def test_aside_spots_in_an_opened_drawer_lie_on_its_pulled_out_floor(kitchen: SceneWorld) -> None:
+    from scipy.spatial import cKDTree
+
+    from hsi_planning.scene.model import support_surfaces
+    from hsi_planning.scheduler.auxiliary import AuxiliaryConfig, free_spots
+    from hsi_planning.scheduler.world import label_points
+
+    state = WorldState(opened=frozenset({"drawer_unit1/drawer1"}))
+    cloud = kitchen.state_cloud(state)
+    config = AuxiliaryConfig()
+    spots = free_spots(kitchen, state, "mug2", cloud, config=config, limit=1000)
+    in_drawer = np.array([p for name, p in spots if name == "drawer_unit1/drawer1"])
+    assert len(in_drawer) > 10, "the pulled-out drawer floor has room for the mug"
+    unit = kitchen.spec.furniture_by_name("drawer_unit1")
+    assert unit.yaw == 0.0  # opens towards -x
+    front = unit.pos[0] - 0.5 * unit.size[0]
+    diameter, height = kitchen.object_size("mug2")
+    # on the floor as the drawer is pulled out (not where the closed drawer had it, under the counter top)
+    assert in_drawer[:, 0].max() + 0.5 * diameter < front
+    floor = support_surfaces(kitchen.spec)["drawer_unit1/drawer1"]
+    centre = (kitchen.part_transform(floor.body, 1.0) @ floor.frame)[:3, 3]
+    assert np.all(np.abs(in_drawer[:, :2] - centre[:2]) <= np.array(floor.half_extents) + 1e-9)
+    pts = np.asarray(cloud.points)
+    pts = pts[cKDTree(label_points(cloud, ["mug2"])).query(pts)[0] > 1e-9]  # the mug's own points moved
+    for p in in_drawer:  # the column a hand puts it down through is free
+        near = np.linalg.norm(pts[:, :2] - p[:2], axis=1) < 0.5 * diameter + config.spot_margin
+        above = (pts[:, 2] > p[2] + 0.01) & (pts[:, 2] < p[2] + height + config.spot_headroom)
+        assert not np.any(near & above)
+
+
 def test_a_short_clear_move_behind_is_stepped_there_without_turning_round(kitchen: SceneWorld) -> None:
     from hsi_planning.scheduler.actions import TaskRun
     from hsi_planning.scheduler.body import HipPose

@@ -54,6 +54,9 @@ class AuxiliaryConfig:
     spot_step: float = 0.02  #: [m] spacing of candidate free spots
     spot_margin: float = 0.02  #: [m] free margin around a spot's footprint
     corridor_margin: float = 0.03  #: [m] extra width of the target's take-out corridor kept free
+    #: [m] free height above the object on a spot reached from above (counters, tables, drawers): the
+    #: gripper's length; a pulled-out drawer's floor still under the counter top has none
+    spot_headroom: float = 0.2
     free_distance: float = 0.35  #: [m] free wrist pose distance from the contact (take-out end)
     #: [m] radius of the straight approach corridor out of a front opening that must be free of
     #: neighbours (a gripper's half width plus room); 0 = only the planned take-out decides
@@ -67,6 +70,7 @@ class AuxiliaryConfig:
             "spot_margin",
             "corridor_margin",
             "corridor_radius",
+            "spot_headroom",
         ):
             if getattr(self, name) < 0.0:
                 raise ConfigError(f"AuxiliaryConfig.{name} must be >= 0 m, got {getattr(self, name)}")
@@ -272,10 +276,13 @@ def free_spots(
         xs = np.arange(-hx + radius, hx - radius + 1e-9, config.spot_step)
         ys = np.arange(-hy + radius, hy - radius + 1e-9, config.spot_step)
         local = np.stack(np.meshgrid(xs, ys, indexing="ij"), axis=-1).reshape(-1, 2)
-        world_xy = (
-            support.frame[:3, :3] @ np.column_stack([local, np.zeros(len(local))]).T
-        ).T + support.frame[:3, 3]
-        slab = pts[(pts[:, 2] > support.top_z + 0.01) & (pts[:, 2] < support.top_z + height)]
+        frame = support.frame
+        if support.body in world.parts:  # a drawer's floor: where the opened drawer has it
+            frame = world.part_transform(support.body, 1.0) @ frame
+        world_xy = (frame[:3, :3] @ np.column_stack([local, np.zeros(len(local))]).T).T + frame[:3, 3]
+        # a hand that puts the object down from above needs room above it as well
+        above = height + (config.spot_headroom if approach_axis(world, support)[2] > 0.5 else 0.0)
+        slab = pts[(pts[:, 2] > support.top_z + 0.01) & (pts[:, 2] < support.top_z + above)]
         ok = np.ones(len(world_xy), dtype=bool)
         if len(slab):
             d, _ = cKDTree(slab[:, :2]).query(world_xy[:, :2], k=1)
