@@ -371,6 +371,26 @@ def test_drawer_pulled_by_its_handle() -> None:
     assert not closed.success and "opened" in closed.failures[0]
 
 
+def test_a_part_is_welded_at_the_tcp_and_a_free_object_at_its_origin(world: SimWorld) -> None:
+    """A door's or drawer's weld point is the TCP (the point the trajectory moves along its arc), a free
+    object's its origin; both ends of each weld are that point when it is made (no jump)."""
+    from hsi_retarget.sim_check.grasp import GraspController
+
+    grasp = GraspController(world)
+    m, d = world.model, world.data
+    for hand, target in (("right", "drawer_unit1/drawer1"), ("left", "can1")):
+        grasp._weld(hand, target)
+        eq = world.welds[(hand, target)]
+        b1, b2 = world.gripper_body[hand], world.body_ids[target]
+        on_gripper = d.xmat[b1].reshape(3, 3) @ m.eq_data[eq, 3:6] + d.xpos[b1]
+        on_target = d.xmat[b2].reshape(3, 3) @ m.eq_data[eq, 0:3] + d.xpos[b2]
+        point = d.geom_xpos[world.tcp_probe[hand]] if target != "can1" else d.xpos[b2]
+        np.testing.assert_allclose(on_gripper, point, atol=1e-9)
+        np.testing.assert_allclose(on_target, point, atol=1e-9)
+        assert d.eq_active[eq] == 1 and grasp.held[hand] == target
+    world.reset()
+
+
 def test_push_spikes_tracking_error_and_execution_recovers(world: SimWorld) -> None:
     traj = Script(world).hold(2.5).build()
     calm = execute(world, traj, ExecutionConfig(settle_s=0.0))

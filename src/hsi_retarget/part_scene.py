@@ -6,13 +6,23 @@ back, opened, as an extra collision scene (:meth:`~hsi_retarget.ik.IKSolver.set_
 objects that ride in it (a drawer's contents) moved along. The hand that opened it is exempt while it
 still holds the handle; every other sphere (the reaching hand, the arm over a drawer's front) keeps its
 margin to it.
+
+The part stands where the robot's hand actually took it, not where the schedule meant it to: a hand that
+pulled a drawer short leaves it short. :meth:`PartPhase.reached` finds the opening [0..1] that carries
+the holder's TCP at the grasp nearest to where it is at the end of the arc, and :meth:`PartPhase.posed`
+puts the part (and what rides in it) there (:func:`~hsi_retarget.tracking.track` does both once per pass,
+with :attr:`~hsi_retarget.retarget.RetargetConfig.reached_part`).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
 
 from hsi_retarget.scene_distance import SceneDistance
 
@@ -30,6 +40,40 @@ class PartPhase:
     t_free: float  #: [s] the holder has let go and left the handle (inf: holds it until closing)
     t_close: float  #: [s] the closing arc starts (inf: stays open)
     scene: SceneDistance  #: the part (and what rides in it) at its opened pose
+    t_grasp: float = -math.inf  #: [s] the holder has taken the handle (the end of its reach)
+    fraction: float = 1.0  #: [-] opening of :attr:`scene` (1: as scheduled)
+    meshes: Mapping[str, Any] | None = None  #: name -> closed-pose trimesh of the part and its riders
+    motion: Callable[[float], NDArray[np.float64]] | None = None  #: opening [-] -> (4, 4) world motion
+
+    def posed(self, fraction: float) -> PartPhase:
+        """This phase with the part opened to ``fraction`` [-] (clipped to [0, 1]); itself when it has no
+        meshes and motion, or is already there."""
+        f = float(np.clip(fraction, 0.0, 1.0))
+        if self.meshes is None or self.motion is None or f == self.fraction:
+            return self
+        motion = self.motion(f)
+        moved = {}
+        for name, mesh in self.meshes.items():
+            copy = mesh.copy()
+            copy.apply_transform(motion)
+            moved[name] = copy
+        return replace(self, fraction=f, scene=SceneDistance(moved, ground=()))
+
+    def reached(self, tcp_at_grasp: NDArray[np.float64], tcp_at_open: NDArray[np.float64]) -> float:
+        """The opening [0..1] that moves the holder's TCP from ``tcp_at_grasp`` (3,) [m] nearest to
+        ``tcp_at_open`` (3,) [m]: how far the hand took the part (1 without a motion)."""
+        if self.motion is None:
+            return 1.0
+        grasp, target = np.asarray(tcp_at_grasp, dtype=float), np.asarray(tcp_at_open, dtype=float)
+        if not (np.isfinite(grasp).all() and np.isfinite(target).all()):
+            return self.fraction
+
+        def miss(f: float) -> float:
+            m = self.motion(f)  # type: ignore[misc]
+            return float(np.linalg.norm(m[:3, :3] @ grasp + m[:3, 3] - target))
+
+        best = min(np.linspace(0.0, 1.0, 51), key=miss)  # then refine within a grid step
+        return float(min(np.clip(best + np.linspace(-0.02, 0.02, 21), 0.0, 1.0), key=miss))
 
     def at(self, t: float) -> tuple[SceneDistance | None, str]:
         """The extra scene and its exempt hand at time ``t`` [s] (``None`` outside the open interval)."""
@@ -58,15 +102,25 @@ def opened_part(schedule: Schedule, spec: Any, exclude: tuple[str, ...] = ()) ->
         k.time for k in schedule.keyframes if k.hand == holder and k.time > t_open and k.object_name != part
     ]
     t_free = min(later) if later else math.inf
+    reaches = [k.time for k in keys if k.hand == holder and k.action == "reach" and k.time <= min(opens)]
     world = SceneWorld(spec)
     motion = world.part_transform(part, 1.0)
     meshes = scene_meshes(spec)
     riding = [o.name for o in spec.objects if o.name not in exclude and support_of(spec, o.name).body == part]
+    closed = {name: meshes[name].copy() for name in (part, *riding)}
     moved = {}
-    for name in (part, *riding):
-        mesh = meshes[name].copy()
-        mesh.apply_transform(motion)
-        moved[name] = mesh
+    for name, mesh in closed.items():
+        copy = mesh.copy()
+        copy.apply_transform(motion)
+        moved[name] = copy
     return PartPhase(
-        part, holder, float(t_open), float(t_free), float(t_close), SceneDistance(moved, ground=())
+        part,
+        holder,
+        float(t_open),
+        float(t_free),
+        float(t_close),
+        SceneDistance(moved, ground=()),
+        t_grasp=float(max(reaches)) if reaches else -math.inf,
+        meshes=closed,
+        motion=lambda f: world.part_transform(part, f),
     )

@@ -103,6 +103,9 @@ class RetargetConfig:
     #: Carries re-aimed from the TCP pose reached at their grasp, and onto each object's placement from a
     #: schedule's record of it (:mod:`hsi_retarget.carry_correction`) [-].
     correct_carry: bool = True
+    #: An opened door or drawer stands, as an obstacle, as far open as the holder's IK took it, not as
+    #: scheduled (:meth:`~hsi_retarget.part_scene.PartPhase.reached`) [-].
+    reached_part: bool = True
 
     def __post_init__(self) -> None:
         if self.iterations_per_frame < 1 or self.initial_iterations < 1 or self.repair_iterations < 0:
@@ -246,6 +249,7 @@ def retarget(
             goals, model, solver, cfg, (qs, pos_track, diag), part=part, events=carried, windows=windows
         )
     goals = diag.pop("goals", goals)
+    diag.pop("part", None)  # the posed part: its opening is diag["part_fraction"]
     qs, diag["smoothing_restored_frames"] = keep_clearance(solver, model, goals.t, qs, cfg.smoothing_hz)
     pos_err, ori_err = tcp_errors(model, goals, qs)
     t_ik = time.perf_counter() - t1

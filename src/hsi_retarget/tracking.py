@@ -53,6 +53,8 @@ class Trace:
     clearance: F64  #: (T,) [m] least collision slack through each frame
     #: (frame, goals after it, corrections so far) for each carry re-aimed at that frame
     versions: list[tuple[int, RobotGoals, list[dict[str, Any]]]]
+    #: (frame, part) where the opened part was posed as the holder reached it (None: not posed)
+    posed: tuple[int, PartPhase] | None = None
 
 
 def frame_targets(
@@ -105,7 +107,9 @@ def track(
     of while it stands open (:mod:`hsi_retarget.part_scene`). ``events``: contact events in the goals' time
     [s] whose carries are re-aimed from the TCP pose reached at their grasp as the IK gets there
     (:func:`~hsi_retarget.carry_correction.correct_carry`). ``arm``: arm configuration tasks
-    (:mod:`hsi_retarget.arm_branch`). With ``trace`` ``diag["trace"]`` keeps the per-frame state
+    (:mod:`hsi_retarget.arm_branch`). With ``cfg.reached_part`` the part is posed, at the first frame of
+    its open interval, as far open as the holder took it (:meth:`~hsi_retarget.part_scene.PartPhase.reached`;
+    ``diag["part"]``, ``diag["part_fraction"]``). With ``trace`` ``diag["trace"]`` keeps the per-frame state
     (:class:`Trace`); ``resume`` = (frame k, a trace of these goals without ``arm``) takes frames before k
     from it (the targets there are the same) and tracks on from k."""
     n = goals.t.shape[0]
@@ -125,8 +129,12 @@ def track(
     settle = (cfg.settle_position, cfg.settle_orientation)
     before: tuple[dict[str, float], dict[str, float]] | None = None  # the last errors measured
     start = 0
+    posed: tuple[int, PartPhase] | None = None
     if resume is not None and resume[0] > 0:
         start, old = resume
+        if old.posed is not None and old.posed[0] < start:
+            posed = old.posed
+            part = posed[1]
         q, qs[:start] = old.qs[start - 1].copy(), old.qs[:start]
         for s in goals.tcp:
             pos_err[s][:start], ori_err[s][:start] = old.pos_err[s][:start], old.ori_err[s][:start]
@@ -141,6 +149,9 @@ def track(
             {s: float(old.ori_err[s][start - 1]) for s in was},
         )
     for i in range(start, n):
+        if cfg.reached_part and part is not None and posed is None and i > 0 and goals.t[i] >= part.t_open:
+            part = _reached(part, goals.t, qs, i, robot)
+            posed = (i, part)
         now = (None, "") if part is None else part.at(float(goals.t[i]))
         if now[0] is not layer[0] or now[1] != layer[1]:
             layer = now
@@ -192,11 +203,28 @@ def track(
     diag: dict[str, Any] = {"qp_fallbacks": fallbacks, "min_collision_slack_m": float(min_clear)}
     if feet is not None:
         diag["footsteps"] = feet.steps
+    if part is not None:
+        diag["part"], diag["part_fraction"] = part, part.fraction
     if events:
         diag["goals"], diag["carry_corrections"] = goals, corrections
     if trace:
-        diag["trace"] = Trace(qs, pos_err, ori_err, fallbacks_to, clear_to, versions)
+        diag["trace"] = Trace(qs, pos_err, ori_err, fallbacks_to, clear_to, versions, posed)
     return qs, pos_err, ori_err, diag
+
+
+def _reached(part: PartPhase, t: F64, qs: F64, i: int, robot: RobotModel) -> PartPhase:
+    """``part`` posed as far open as its holder's TCP took it between the grasp (the frame at
+    ``part.t_grasp``) and frame ``i - 1`` of configurations ``qs`` (T, nq) at times ``t`` (T,) [s];
+    unchanged without a holder TCP or a grasp before frame ``i``."""
+    frame = robot.tcp_frames.get(part.holder)
+    grasp = int(np.searchsorted(t, part.t_grasp, side="right")) - 1
+    if frame is None or not 0 <= grasp < i:
+        return part
+    at_grasp = robot.fk(qs[grasp], (frame,))[frame][:3, 3]
+    at_open = robot.fk(qs[i - 1], (frame,))[frame][:3, 3]
+    fraction = part.reached(at_grasp, at_open)
+    _LOG.debug("%s opened to %.0f%% by the %s hand", part.part, 100.0 * fraction, part.holder)
+    return part.posed(fraction)
 
 
 def _residual(
@@ -242,6 +270,7 @@ def retrack_missed(
     ``diag["arm_branches"]`` reports the search when there was one."""
     qs, pos_err, diag = first
     trace = diag.pop("trace", None)
+    posed = diag.get("part", part)
     branch_cfg = cfg.arm_branch
     missed = [] if branch_cfg is None else missed_contacts(goals.t, windows, pos_err, branch_cfg.trigger)
     if branch_cfg is None or not missed:
@@ -249,7 +278,7 @@ def retrack_missed(
     started, n = time.perf_counter(), goals.t.shape[0]
 
     def targets_at(i: int) -> IKTargets:  # the opened part as the first pass had it at frame i
-        scene, holder = (None, "") if part is None else part.at(float(goals.t[i]))
+        scene, holder = (None, "") if posed is None else posed.at(float(goals.t[i]))
         solver.set_part_scene(scene, holder)
         return frame_targets(goals, i, holder=holder)
 

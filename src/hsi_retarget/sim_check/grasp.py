@@ -15,11 +15,12 @@ grasp event, while it closes and holds, and after the release until it has let g
 ``release_grace_s``).
 
 On activation the weld's relative pose is set to the current gripper-to-target pose, so the target keeps
-where it is in the hand (no jump), and with ``stop_fingers`` the finger targets stop where the fingers are
-(a force-limited gripper does not squeeze on against the weld). A ``release`` event deactivates the weld
-and opens the fingers to the trajectory's opening (:mod:`hsi_retarget.finger_room`), which they follow
-from then on. A grasp still pending after ``timeout_s`` is recorded as failed (the fingers stay
-closed, nothing is held).
+where it is in the hand (no jump); a door's or drawer's weld point is the TCP (a free object's is its
+origin), so the part follows the point the trajectory moves along its arc. With ``stop_fingers`` the
+finger targets stop where the fingers are (a force-limited gripper does not squeeze on against the weld).
+A ``release`` event deactivates the weld and opens the fingers to the trajectory's opening
+(:mod:`hsi_retarget.finger_room`), which they follow from then on. A grasp still pending after ``timeout_s``
+is recorded as failed (the fingers stay closed, nothing is held).
 """
 
 from __future__ import annotations
@@ -227,18 +228,22 @@ class GraspController:
         return bool(((own[:, 0] & theirs[:, 1]) | (own[:, 1] & theirs[:, 0])).any())
 
     def _weld(self, hand: str, target: str) -> None:
+        """Weld ``target`` to ``hand``'s gripper at their current relative pose. A free object's weld point
+        is its origin; a door's or drawer's is the TCP, where the hand pulls its handle: the joint then
+        follows the point the trajectory moves along its arc, not a point off the gripper."""
         w = self.world
         m, d = w.model, w.data
         mujoco.mj_kinematics(m, d)
         b1, b2 = w.gripper_body[hand], w.body_ids[target]
-        rot1 = d.xmat[b1].reshape(3, 3)
+        rot1, rot2 = d.xmat[b1].reshape(3, 3), d.xmat[b2].reshape(3, 3)
+        anchor = d.geom_xpos[w.tcp_probe[hand]] if w.target_kind(target) == "part" else d.xpos[b2]
         inv = np.zeros(4)
         rel = np.zeros(4)
         mujoco.mju_negQuat(inv, d.xquat[b1])
         mujoco.mju_mulQuat(rel, inv, d.xquat[b2])
         eq = w.welds[(hand, target)]
-        m.eq_data[eq, 0:3] = 0.0  # anchor at body2's origin
-        m.eq_data[eq, 3:6] = rot1.T @ (d.xpos[b2] - d.xpos[b1])  # body2 position in body1's frame
+        m.eq_data[eq, 0:3] = rot2.T @ (anchor - d.xpos[b2])  # the weld point in body2's frame
+        m.eq_data[eq, 3:6] = rot1.T @ (anchor - d.xpos[b1])  # the same point in body1's frame
         m.eq_data[eq, 6:10] = rel  # body2 orientation relative to body1
         d.eq_active[eq] = 1
         self.held[hand] = target

@@ -1,0 +1,119 @@
+"""The opened part as the robot left it: the opening a holder's TCP reached, the part posed there, the IK
+tracking posing it once as its hand got there, and a resumed second pass taking that pose from the trace."""
+
+from __future__ import annotations
+
+import dataclasses
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from hsi_planning.scene_paths import load_scene
+from hsi_planning.scheduler.world import SceneWorld
+from hsi_retarget.arm_branch import ArmBranch
+from hsi_retarget.ik import IKSolver
+from hsi_retarget.mapping import RobotGoals
+from hsi_retarget.part_scene import PartPhase, opened_part
+from hsi_retarget.retarget import RetargetConfig
+from hsi_retarget.robots import RobotModel
+from hsi_retarget.scene_distance import SceneDistance
+from hsi_retarget.tracking import track
+
+DRAWER = "drawer_unit1/drawer1"
+DOOR = "cabinet1/door1"
+#: TCP orientation pulling the drawer: approach +x into the unit, fingers closing along z
+SIDE = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+
+
+def _phase(part: str) -> PartPhase:
+    """The phase of a schedule whose right hand reaches ``part``'s handle by 1 s, opens it by 2 s, holds
+    it to 2.5 s while the left hand grasps mug1 at 3 s, and closes it from 4 s."""
+
+    def key(t: float, hand: str, action: str, obj: str = "") -> SimpleNamespace:
+        return SimpleNamespace(time=t, hand=hand, action=action, object_name=obj)
+
+    keys = [key(0.0, "right", "idle"), key(1.0, "right", "reach", part), key(1.5, "right", "open", part)]
+    keys += [key(2.0, "right", "open", part), key(2.5, "right", "hold", part)]
+    keys += [key(3.0, "left", "grasp", "mug1")]
+    keys += [key(4.0, "right", "close", part), key(5.0, "right", "idle")]
+    schedule = SimpleNamespace(info={"part": part, "door_hand": "right"}, keyframes=keys)
+    phase = opened_part(schedule, load_scene("kitchen"), exclude=("mug1",))  # type: ignore[arg-type]
+    assert phase is not None
+    return phase
+
+
+@pytest.mark.parametrize("part", [DRAWER, DOOR])
+def test_the_reached_opening_is_the_one_that_carries_the_grasp_to_the_tcp(part: str) -> None:
+    phase = _phase(part)
+    world = SceneWorld(load_scene("kitchen"))
+    closed = world.handle_at(part, 0.0)
+    assert phase.t_grasp == 1.0 and phase.fraction == 1.0
+    assert phase.reached(closed, world.handle_at(part, 0.6)) == pytest.approx(0.6, abs=0.002)
+    assert phase.reached(closed, closed) == pytest.approx(0.0, abs=1e-9)
+    assert phase.reached(closed, world.handle_at(part, 1.0)) == pytest.approx(1.0, abs=1e-9)
+    off = world.handle_at(part, 0.3) + np.array([0.0, 0.0, 0.05])  # 5 cm above the arc: nearest point
+    assert phase.reached(closed, off) == pytest.approx(0.3, abs=0.01)
+    assert phase.reached(closed, np.array([np.nan, 0.0, 0.0])) == 1.0  # unknown: as it stands
+
+
+def test_the_part_posed_where_it_was_taken_is_the_obstacle_there() -> None:
+    phase = _phase(DRAWER)
+    world = SceneWorld(load_scene("kitchen"))
+    short = phase.posed(0.6)
+    assert short.fraction == 0.6 and short.scene is not phase.scene and short.t_open == phase.t_open
+    assert phase.posed(1.0) is phase and phase.posed(1.7).fraction == 1.0  # clipped to fully open
+    handle = world.handle_at(DRAWER, 0.6)[None]
+    assert abs(float(short.scene.query(handle)[0][0])) < 0.01  # the handle is where it was left
+    assert float(phase.scene.query(handle)[0][0]) > 0.03  # fully opened, the front stands beyond it
+
+
+def _pull(robot: RobotModel, fraction: float, n: int = 120) -> RobotGoals:
+    """Goals of a right hand that takes the drawer's handle by 1 s and pulls it to ``fraction`` of its
+    travel by 2 s, then holds it (frames every 1/24 s), the base in front of the drawer unit."""
+    world = SceneWorld(load_scene("kitchen"))
+    t = np.arange(n) / 24.0
+    f = np.clip(t - 1.0, 0.0, 1.0) * fraction
+    right = np.repeat(np.eye(4)[None], n, 0)
+    right[:, :3, :3] = SIDE
+    right[:, :3, 3] = [world.handle_at(DRAWER, float(v)) for v in f]
+    right[t < 1.0, :3, 3] += np.outer(1.0 - t[t < 1.0], [-0.12, 0.0, 0.0])  # the approach
+    root = np.eye(4)
+    root[:3, 3] = (0.0, -0.75, 0.0)
+    one = np.ones(n, dtype=bool)
+    return RobotGoals(
+        t=t,
+        tcp={"right": right},
+        active={"right": one},
+        reachable={"right": one},
+        reach_excess={"right": np.zeros(n)},
+        root=np.repeat(root[None], n, 0),
+        lift=np.zeros(n),
+        shoulder={"right": np.zeros((n, 3))},
+        scale=1.0,
+        contact={},
+    )
+
+
+def test_tracking_poses_the_part_as_the_holder_took_it_and_a_resume_takes_that_pose() -> None:
+    robot = RobotModel("dual_ur5e")
+    spec = load_scene("kitchen")
+    phase = _phase(DRAWER)
+    goals = _pull(robot, 0.6)
+    solver = IKSolver(robot, scene=SceneDistance.from_spec(spec, exclude=[DRAWER, "mug1"]))
+    cfg = RetargetConfig()
+    first = track(goals, robot, solver, cfg, part=phase, trace=True)
+    assert first[1]["right"][30:].max() < 0.01  # the hand followed the handle
+    assert first[3]["part_fraction"] == pytest.approx(0.6, abs=0.03)
+    trace = first[3]["trace"]
+    assert trace.posed is not None and trace.posed[0] == int(np.argmax(goals.t >= phase.t_open))
+    fixed = track(goals, robot, solver, dataclasses.replace(cfg, reached_part=False), part=phase)
+    assert fixed[3]["part_fraction"] == 1.0
+    # an arm task from frame 60 on: resumed there from the trace, the part keeps the pose found at frame 48
+    goal_q = np.array(first[0][80])
+    goal_q[robot.arm_q_indices("left")] += 0.2
+    arm = [ArmBranch("left", float(goals.t[90]), goal_q, np.where(np.arange(120) >= 60, 0.05, 0.0), 0.0)]
+    full = track(goals, robot, solver, cfg, part=phase, arm=arm)
+    resumed = track(goals, robot, solver, cfg, part=phase, arm=arm, resume=(60, trace))
+    np.testing.assert_array_equal(resumed[0], full[0])
+    assert resumed[3]["part"] is trace.posed[1] and resumed[3]["part_fraction"] == full[3]["part_fraction"]
