@@ -13,8 +13,9 @@ from hsi_planning.scene_paths import load_scene
 from hsi_planning.scheduler.world import SceneWorld
 from hsi_retarget.arm_branch import ArmBranch
 from hsi_retarget.ik import IKSolver
+from hsi_retarget.joint_trajectory import ContactEvent
 from hsi_retarget.mapping import RobotGoals
-from hsi_retarget.part_scene import PartPhase, opened_part
+from hsi_retarget.part_scene import PartPhase, follow_part, opened_part
 from hsi_retarget.retarget import RetargetConfig
 from hsi_retarget.robots import RobotModel
 from hsi_retarget.scene_distance import SceneDistance
@@ -117,3 +118,28 @@ def test_tracking_poses_the_part_as_the_holder_took_it_and_a_resume_takes_that_p
     resumed = track(goals, robot, solver, cfg, part=phase, arm=arm, resume=(60, trace))
     np.testing.assert_array_equal(resumed[0], full[0])
     assert resumed[3]["part"] is trace.posed[1] and resumed[3]["part_fraction"] == full[3]["part_fraction"]
+
+
+def test_a_grasp_of_what_the_drawer_holds_follows_the_drawer_as_it_was_pulled() -> None:
+    phase = _phase(DRAWER)
+    assert set(phase.contents) == {"mug2", "box2"} and _phase(DOOR).contents == ()
+    short = phase.posed(0.6)
+    world = SceneWorld(load_scene("kitchen"))
+    moved = world.handle_at(DRAWER, 0.6) - world.handle_at(DRAWER, 1.0)  # the contents, 40% less pulled
+    np.testing.assert_allclose(short.shift()[:3, 3], moved, atol=1e-9)
+    np.testing.assert_allclose(short.shift()[:3, :3], np.eye(3), atol=1e-12)
+    goals = _pull(RobotModel("dual_ur5e"), 1.0)
+    left = np.array(goals.tcp["right"])
+    goals = dataclasses.replace(
+        goals, tcp={**goals.tcp, "left": left}, active={**goals.active, "left": goals.active["right"]}
+    )
+    grasp = [ContactEvent(3.0, "left", "grasp", "mug2"), ContactEvent(3.0, "right", "grasp", "can1")]
+    out = follow_part(goals, short, grasp)
+    shift = out.tcp["left"][:, :3, 3] - left[:, :3, 3]
+    t = goals.t
+    np.testing.assert_allclose(shift[t <= phase.t_open], 0.0, atol=1e-12)  # before the drawer stood open
+    np.testing.assert_allclose(shift[np.argmin(np.abs(t - 3.0))], moved, atol=1e-9)  # at the grasp: all of it
+    np.testing.assert_allclose(shift[t >= 3.5], 0.0, atol=1e-12)  # eased out over 0.5 s of the carry
+    assert np.all(np.linalg.norm(np.diff(shift, axis=0), axis=1) < 0.2 * np.linalg.norm(moved))  # no jumps
+    np.testing.assert_array_equal(out.tcp["right"], goals.tcp["right"])  # can1 is not in the drawer
+    assert follow_part(goals, phase, grasp) is goals  # pulled as scheduled: nothing moves

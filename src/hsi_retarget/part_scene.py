@@ -11,23 +11,33 @@ The part stands where the robot's hand actually took it, not where the schedule 
 pulled a drawer short leaves it short. :meth:`PartPhase.reached` finds the opening [0..1] that carries
 the holder's TCP at the grasp nearest to where it is at the end of the arc, and :meth:`PartPhase.posed`
 puts the part (and what rides in it) there (:func:`~hsi_retarget.tracking.track` does both once per pass,
-with :attr:`~hsi_retarget.retarget.RetargetConfig.reached_part`).
+with :attr:`~hsi_retarget.retarget.RetargetConfig.reached_part`). What the part holds moves with it:
+:func:`follow_part` moves the goals of a hand that grasps one of its :attr:`PartPhase.contents` by the
+difference between the reached and the scheduled opening (a drawer pulled 2 cm short: its mug is 2 cm
+further in), eased in from the end of the opening arc to the grasp and out after it, so that the hand
+closes where the object is and the carry re-aimed from there (:mod:`hsi_retarget.carry_correction`)
+still puts it down on its placement.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial.transform import Rotation
 
 from hsi_retarget.scene_distance import SceneDistance
 
 if TYPE_CHECKING:
     from hsi_planning.scheduler.schedule import Schedule
+    from hsi_retarget.joint_trajectory import ContactEvent
+    from hsi_retarget.mapping import RobotGoals
+
+F64 = NDArray[np.float64]
 
 
 @dataclass(frozen=True, eq=False)
@@ -44,6 +54,14 @@ class PartPhase:
     fraction: float = 1.0  #: [-] opening of :attr:`scene` (1: as scheduled)
     meshes: Mapping[str, Any] | None = None  #: name -> closed-pose trimesh of the part and its riders
     motion: Callable[[float], NDArray[np.float64]] | None = None  #: opening [-] -> (4, 4) world motion
+    contents: tuple[str, ...] = ()  #: the objects standing on the part (a drawer's), the task's included
+
+    def shift(self) -> F64:
+        """(4, 4) world motion from the part as scheduled (opening 1) to it at :attr:`fraction`: where
+        its contents are, relative to where the schedule put them (identity without a motion)."""
+        if self.motion is None or self.fraction == 1.0:
+            return np.eye(4)
+        return np.asarray(self.motion(self.fraction) @ np.linalg.inv(self.motion(1.0)))
 
     def posed(self, fraction: float) -> PartPhase:
         """This phase with the part opened to ``fraction`` [-] (clipped to [0, 1]); itself when it has no
@@ -123,4 +141,36 @@ def opened_part(schedule: Schedule, spec: Any, exclude: tuple[str, ...] = ()) ->
         t_grasp=float(max(reaches)) if reaches else -math.inf,
         meshes=closed,
         motion=lambda f: world.part_transform(part, f),
+        contents=tuple(o.name for o in spec.objects if support_of(spec, o.name).body == part),
     )
+
+
+def _ease(u: F64) -> F64:
+    u = np.clip(u, 0.0, 1.0)
+    return np.asarray(10 * u**3 - 15 * u**4 + 6 * u**5)
+
+
+def follow_part(
+    goals: RobotGoals, part: PartPhase, events: Sequence[ContactEvent], ease_s: float = 0.5
+) -> RobotGoals:
+    """``goals`` whose hands grasping one of ``part``'s contents (``events`` in the goals' time [s]) after
+    it opened are moved by :meth:`PartPhase.shift` (a drawer's: a translation), eased in from the end of
+    the opening arc to the grasp and out over ``ease_s`` [s] after it; ``goals`` itself when nothing moves."""
+    move = part.shift()
+    if np.allclose(move, np.eye(4)) or not part.contents:
+        return goals
+    rotvec = Rotation.from_matrix(move[:3, :3]).as_rotvec()
+    t, tcp = goals.t, {s: np.array(p) for s, p in goals.tcp.items()}
+    for e in events:
+        if e.kind != "grasp" or e.object_name not in part.contents or e.hand not in tcp:
+            continue
+        if not part.t_open <= e.time < part.t_close:
+            continue
+        rise = _ease((t - part.t_open) / max(e.time - part.t_open, 1e-9))
+        weight = np.where(t <= e.time, rise, 1.0 - _ease((t - e.time) / max(ease_s, 1e-9)))
+        sel = np.flatnonzero(weight > 0.0)
+        step = np.tile(np.eye(4), (sel.shape[0], 1, 1))
+        step[:, :3, :3] = Rotation.from_rotvec(weight[sel, None] * rotvec[None, :]).as_matrix()
+        step[:, :3, 3] = weight[sel, None] * move[None, :3, 3]
+        tcp[e.hand][sel] = step @ tcp[e.hand][sel]
+    return replace(goals, tcp=tcp)

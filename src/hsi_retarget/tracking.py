@@ -29,7 +29,7 @@ from hsi_retarget.humanoid_ik import Footsteps, plan_footsteps
 from hsi_retarget.ik import IKSolver, IKTargets
 from hsi_retarget.joint_trajectory import ContactEvent
 from hsi_retarget.mapping import RobotGoals, nominal_configuration
-from hsi_retarget.part_scene import PartPhase
+from hsi_retarget.part_scene import PartPhase, follow_part
 from hsi_retarget.robots import RobotModel
 from hsi_retarget.scene_distance import SceneDistance
 
@@ -51,7 +51,8 @@ class Trace:
     ori_err: dict[str, F64]  #: side -> (T,) [rad] TCP orientation errors (NaN where inactive)
     fallbacks: NDArray[np.int64]  #: (T,) [-] QP fallbacks through each frame
     clearance: F64  #: (T,) [m] least collision slack through each frame
-    #: (frame, goals after it, corrections so far) for each carry re-aimed at that frame
+    #: (frame, goals after it, corrections so far) for each change of the goals at that frame (a carry
+    #: re-aimed, the goals following the posed part's contents)
     versions: list[tuple[int, RobotGoals, list[dict[str, Any]]]]
     #: (frame, part) where the opened part was posed as the holder reached it (None: not posed)
     posed: tuple[int, PartPhase] | None = None
@@ -109,7 +110,8 @@ def track(
     (:func:`~hsi_retarget.carry_correction.correct_carry`). ``arm``: arm configuration tasks
     (:mod:`hsi_retarget.arm_branch`). With ``cfg.reached_part`` the part is posed, at the first frame of
     its open interval, as far open as the holder took it (:meth:`~hsi_retarget.part_scene.PartPhase.reached`;
-    ``diag["part"]``, ``diag["part_fraction"]``). With ``trace`` ``diag["trace"]`` keeps the per-frame state
+    ``diag["part"]``, ``diag["part_fraction"]``), and with ``events`` the grasps of its contents follow it
+    (:func:`~hsi_retarget.part_scene.follow_part`). With ``trace`` ``diag["trace"]`` keeps the per-frame state
     (:class:`Trace`); ``resume`` = (frame k, a trace of these goals without ``arm``) takes frames before k
     from it (the targets there are the same) and tracks on from k."""
     n = goals.t.shape[0]
@@ -152,6 +154,9 @@ def track(
         if cfg.reached_part and part is not None and posed is None and i > 0 and goals.t[i] >= part.t_open:
             part = _reached(part, goals.t, qs, i, robot)
             posed = (i, part)
+            if events:  # a hand that grasps what the part holds goes where that now is
+                goals = follow_part(goals, part, events)
+                versions.append((i, goals, list(corrections)))
         now = (None, "") if part is None else part.at(float(goals.t[i]))
         if now[0] is not layer[0] or now[1] != layer[1]:
             layer = now
@@ -277,10 +282,12 @@ def retrack_missed(
         return qs, diag
     started, n = time.perf_counter(), goals.t.shape[0]
 
+    aimed = diag.get("goals", goals)  # as the first pass re-aimed them (carries, the part's contents)
+
     def targets_at(i: int) -> IKTargets:  # the opened part as the first pass had it at frame i
         scene, holder = (None, "") if posed is None else posed.at(float(goals.t[i]))
         solver.set_part_scene(scene, holder)
-        return frame_targets(goals, i, holder=holder)
+        return frame_targets(aimed, i, holder=holder)
 
     branches = find_branches(goals, robot, solver, missed, targets_at, config=branch_cfg)
     solver.set_part_scene(None)
