@@ -3,6 +3,8 @@ humanoid feet and centre of mass, Jacobians against finite differences."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -260,16 +262,44 @@ def test_footsteps_keep_up_with_a_walking_pelvis(robots: dict[str, RobotModel]) 
     pelvis = _walking_pelvis(robot, np.clip((t - 0.5) / 1.5, 0.0, 1.0))  # 1 m at 0.67 m/s, stops at 2.0 s
     steps = plan_footsteps(robot, t, pelvis, cfg)
     final = _stance(robot, pelvis[-1])
-    after = np.flatnonzero(t >= 3.5)  # 1.5 s after the pelvis stopped: on both feet, under it
+    after = np.flatnonzero(t >= 4.0)  # 2 s after the pelvis stopped: on both feet, under it
     for j in after:
         assert steps.support[j] == ("left", "right")
         for side, pose in final.items():
             assert np.linalg.norm(steps.feet[side][j][:2, 3] - pose[:2, 3]) <= cfg.step_threshold
     assert max(float(s["length_m"]) for s in steps.steps) <= cfg.max_step_length + 1e-9
-    # with the former 25 cm steps of 0.7 s the feet were still 0.7 m behind at 3.5 s (0.5 m at 5 s)
-    former = SupportConfig(max_step_length=0.25, shift_time=0.3, swing_time=0.4)
+    # with the former 25 cm steps of 0.7 s the feet were still 0.7 m behind at 4 s (0.5 m at 5 s)
+    former = SupportConfig(max_step_length=0.25, shift_time=0.3, swing_time=0.4, lookahead=0.0)
     slow = plan_footsteps(robot, t, pelvis, former)
     assert np.linalg.norm(slow.feet["left"][after[0]][:2, 3] - final["left"][:2, 3]) > 0.3
+
+
+def test_footsteps_leave_before_the_pelvis_goal_moves_on(robots: dict[str, RobotModel]) -> None:
+    """With the look-ahead the first step starts before the pelvis goal has moved the step threshold
+    (a door swinging after the hand finds the feet gone), and the feet arrive no later than without it."""
+    from hsi_retarget.humanoid_ik import _stance, plan_footsteps
+
+    robot = robots["humanoid"]
+    t = np.arange(0.0, 6.0, 1.0 / 60.0)
+    pelvis = _walking_pelvis(robot, np.clip((t - 1.5) / 1.5, 0.0, 1.0) * 0.6)  # 60 cm from 1.5 s to 3 s
+    late = plan_footsteps(robot, t, pelvis, SupportConfig(lookahead=0.0))
+    early = plan_footsteps(robot, t, pelvis, SupportConfig(lookahead=1.1))
+    first_late, first_early = float(late.steps[0]["t_start"]), float(early.steps[0]["t_start"])
+    moved = np.linalg.norm(pelvis[:, :2, 3] - pelvis[0, :2, 3], axis=1)
+    assert moved[int(np.searchsorted(t, first_late))] > SupportConfig().step_threshold - 0.02
+    assert first_early < 1.5 < first_late  # the feet leave before the body does
+    final = _stance(robot, pelvis[-1])
+
+    def arrived(steps: Any) -> float:  # [s] both soles within 5 cm of the final stance from then on
+        near = np.ones(t.shape[0], dtype=bool)
+        for side, pose in final.items():
+            near &= np.linalg.norm(steps.feet[side][:, :2, 3] - pose[:2, 3], axis=1) < 0.05
+        assert near[-1]
+        return float(t[np.flatnonzero(~near).max() + 1])
+
+    assert arrived(early) <= arrived(late)
+    with pytest.raises(ConfigError, match="lookahead"):
+        SupportConfig(lookahead=-0.1)
 
 
 def test_support_polygon_is_the_hull_of_both_soles(robots: dict[str, RobotModel]) -> None:

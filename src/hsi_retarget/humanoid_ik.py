@@ -5,10 +5,11 @@ re-planted feet when the pelvis goal walks away from them.
   LOCAL_WORLD_ALIGNED Jacobians) and the CoM (pinocchio ``centerOfMass`` / ``jacobianCenterOfMass``) as
   inequality rows keeping its horizontal position ``com_margin`` inside the convex hull of the supporting
   soles' rectangles, plus an optional soft CoM goal (weight shift before a step).
-- :func:`plan_footsteps`: there is no walking controller. Feet stay planted while the pelvis goal stays
-  within ``step_threshold`` of its nominal stance; beyond it, a step sequence re-plants the feet one at a
-  time (weight shift over the stance foot, then a min-jerk swing with a ``swing_height`` arc). In MuJoCo the
-  pelvis is held on the planned root path by the model's ``pelvis_anchor`` mocap weld.
+- :func:`plan_footsteps`: there is no walking controller. Feet stay planted while the pelvis goal
+  ``lookahead`` ahead stays within ``step_threshold`` of its nominal stance; beyond it, a step sequence
+  re-plants the feet one at a time (weight shift over the stance foot, then a min-jerk swing with a
+  ``swing_height`` arc). In MuJoCo the pelvis is held on the planned root path by the model's
+  ``pelvis_anchor`` mocap weld.
 """
 
 from __future__ import annotations
@@ -43,6 +44,9 @@ class SupportConfig:
     com_gain: float = 0.5  #: [-] fraction of the CoM distance to the polygon edge one step may use
     com_weight: float = 10.0  #: [1/m^2] soft CoM goal during a weight shift
     step_threshold: float = 0.12  #: [m] stance foot displacement that triggers a step
+    #: [s] the displacement is measured to the stance under the pelvis goal this far ahead: the feet step
+    #: before the body moves on (out of the way of a door swinging after the hand)
+    lookahead: float = 1.1
     yaw_threshold: float = 0.35  #: [rad] stance heading change that triggers a step
     max_step_length: float = 0.45  #: [m] longest single step
     step_crouch: float = 0.07  #: [m] the pelvis goal is lowered this much while stepping (leg reach)
@@ -54,6 +58,8 @@ class SupportConfig:
         for name in ("foot_half_length", "foot_half_width", "com_gain", "step_threshold", "yaw_threshold"):
             if not getattr(self, name) > 0.0:
                 raise ConfigError(f"SupportConfig.{name} must be > 0, got {getattr(self, name)}")
+        if not self.lookahead >= 0.0:
+            raise ConfigError(f"SupportConfig.lookahead must be >= 0 s, got {self.lookahead}")
         for name in ("max_step_length", "shift_time", "swing_time"):
             if not getattr(self, name) > 0.0:
                 raise ConfigError(f"SupportConfig.{name} must be > 0, got {getattr(self, name)}")
@@ -158,7 +164,8 @@ def plan_footsteps(robot: RobotModel, t: F64, pelvis: F64, config: SupportConfig
     while i < n:
         for s, track in feet.items():
             track[i] = current[s]
-        nominal = _stance(robot, pelvis[i])
+        ahead = min(int(np.searchsorted(t, t[i] + cfg.lookahead)), n - 1)
+        nominal = _stance(robot, pelvis[ahead])
         disp = {s: float(np.linalg.norm(nominal[s][:2, 3] - current[s][:2, 3])) for s in current}
         dyaw = abs(_yaw(nominal["left"]) - _yaw(current["left"]))
         dyaw = min(dyaw, 2 * math.pi - dyaw)
