@@ -29,6 +29,7 @@ import pinocchio as pin
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
+from hsi_retarget.easing import ease
 from hsi_retarget.joint_trajectory import ContactEvent
 from hsi_retarget.mapping import RobotGoals
 from hsi_retarget.robots import RobotModel
@@ -36,11 +37,6 @@ from hsi_retarget.robots import RobotModel
 __all__ = ["carry_frames", "correct_carry", "place_carries"]
 
 F64 = NDArray[np.float64]
-
-
-def _ease(u: F64) -> F64:
-    u = np.clip(u, 0.0, 1.0)
-    return np.asarray(10 * u**3 - 15 * u**4 + 6 * u**5)
 
 
 def _carries(events: Sequence[ContactEvent]) -> list[tuple[str, str, float, float | None]]:
@@ -100,7 +96,7 @@ def correct_carry(
         end = float(t[-1]) if t_release is None else t_release
         weight = np.where(t >= t_grasp - 1e-9, 1.0, 0.0)
         after = t > end
-        weight[after] = 1.0 - _ease((t[after] - end) / ease_s) if t_release is not None else 1.0
+        weight[after] = 1.0 - ease((t[after] - end) / ease_s) if t_release is not None else 1.0
         rotvec = Rotation.from_matrix(delta[:3, :3]).as_rotvec()
         sel = np.flatnonzero(weight > 0.0)
         step = np.tile(np.eye(4), (sel.shape[0], 1, 1))
@@ -151,9 +147,9 @@ def place_carries(
         shift = np.asarray(record["place"], dtype=float) - np.mean(landed, axis=0)  # two hands: one shift
         if float(np.linalg.norm(shift)) < min_position:
             continue
-        weight = _ease((t - t[i]) / max(float(t[r] - t[i]), 1e-9))
+        weight = ease((t - t[i]) / max(float(t[r] - t[i]), 1e-9))
         after = t > t[r]
-        weight[after] = 1.0 - _ease((t[after] - t[r]) / ease_s)
+        weight[after] = 1.0 - ease((t[after] - t[r]) / ease_s)
         for h in hands:
             tcp[h][:, :3, 3] += weight[:, None] * shift[None, :]
         records.append({"object": name, "time_s": float(t_grasp), "shift_m": [float(v) for v in shift]})

@@ -38,6 +38,7 @@ from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation, Slerp
 
 from hsi_planning.errors import ConfigError
+from hsi_retarget.easing import ease
 from hsi_retarget.grasp_windows import GraspWindow
 from hsi_retarget.human_motion import HumanMotion
 
@@ -103,12 +104,6 @@ class GraspDepthConfig:
     def offset(self) -> float:
         """[m] full TCP offset along the wrist's x axis while an object is grasped."""
         return self.palm_offset + self.grasp_depth
-
-
-def _ease(u: F64) -> F64:
-    """Minimum-jerk ease 0 -> 1 of ``u`` clipped to [0, 1]."""
-    u = np.clip(u, 0.0, 1.0)
-    return np.asarray(10 * u**3 - 15 * u**4 + 6 * u**5)
 
 
 def _between(t: F64, t0: float, t1: float) -> NDArray[np.bool_]:
@@ -209,7 +204,7 @@ def _approach(hand: _Hand, w: GraspWindow, held: bool) -> None:
     pre = c.goal - c.length * c.axis + up
     blend = _between(t, start, c.split)
     line = _between(t, c.split, end) & ~blend
-    sigma = _ease((t[blend] - start) / max(c.split - start, 1e-9))
+    sigma = ease((t[blend] - start) / max(c.split - start, 1e-9))
     if not held:  # a carried object's orientation is set by the carry
         hand.target[blend] = c.rot
         hand.weight[blend] = np.maximum(hand.weight[blend], sigma)
@@ -222,7 +217,7 @@ def _approach(hand: _Hand, w: GraspWindow, held: bool) -> None:
     hand.near[line] = 1.0
     if cfg.standoff > 0.0:
         hand.shifts.append((blend, sigma, hand.index(c.split), pre))
-        u = _ease((t[line] - c.split) / max(end - c.split, 1e-9))
+        u = ease((t[line] - c.split) / max(end - c.split, 1e-9))
         hand.line[line] = pre + u[:, None] * (c.goal - pre)
 
 
@@ -235,7 +230,7 @@ def _retreat(hand: _Hand, w: GraspWindow, held: bool) -> None:
     post = c.goal - c.length * c.axis + up
     still = _between(t, w.time, c.split)
     blend = _between(t, c.split, end) & ~still
-    sigma = 1.0 - _ease((t[blend] - c.split) / max(end - c.split, 1e-9))
+    sigma = 1.0 - ease((t[blend] - c.split) / max(end - c.split, 1e-9))
     hand.target[still], hand.weight[still] = c.rot, 1.0
     hand.near[still] = 1.0
     hand.near[blend] = np.maximum(hand.near[blend], sigma)
@@ -249,7 +244,7 @@ def _retreat(hand: _Hand, w: GraspWindow, held: bool) -> None:
         hold = _between(t, w.time, start)
         hand.line[hold] = c.goal
         line = still & ~hold
-        u = _ease((t[line] - start) / max(c.split - start, 1e-9))
+        u = ease((t[line] - start) / max(c.split - start, 1e-9))
         hand.line[line] = c.goal + u[:, None] * (post - c.goal)
         hand.shifts.append((blend, sigma, hand.index(c.split), post))
 
@@ -276,7 +271,7 @@ def _carry(hand: _Hand, grasp: GraspWindow, release: GraspWindow | None) -> None
         for w, c in ((grasp, picked), (release, placed))
     ]
     slerp = Slerp([0.0, 1.0], Rotation.concatenate(ends))  # relative to the heading: turns with the body
-    relative = slerp(_ease((t[span] - a) / max(b - a, 1e-9)))
+    relative = slerp(ease((t[span] - a) / max(b - a, 1e-9)))
     hand.target[span] = (hand.heading[span] * relative).as_matrix()
 
 

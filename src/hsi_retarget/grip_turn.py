@@ -28,6 +28,7 @@ from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
 from hsi_planning.errors import ConfigError
+from hsi_retarget.easing import ease
 from hsi_retarget.grasp_windows import GraspWindow
 from hsi_retarget.human_motion import HumanMotion
 
@@ -166,11 +167,6 @@ def narrow_side_angle(rotation: F64, prims: Sequence[Any], config: GripTurnConfi
     return float((mid + 0.5 * np.pi) % np.pi - 0.5 * np.pi)
 
 
-def _ease(u: F64) -> F64:
-    u = np.clip(u, 0.0, 1.0)
-    return np.asarray(10 * u**3 - 15 * u**4 + 6 * u**5)
-
-
 def turn_weight(
     t: F64, grasp: GraspWindow, release: GraspWindow | None, span: tuple[float, float], turn_s: float
 ) -> F64:
@@ -179,11 +175,11 @@ def turn_weight(
     after ``span[1]``); 1 to the end without a release."""
     a1 = grasp.time
     a0 = max(min(grasp.before[0], a1 - turn_s), span[0])
-    w = _ease((t - a0) / max(a1 - a0, 1e-9))
+    w = ease((t - a0) / max(a1 - a0, 1e-9))
     if release is not None:
         b0 = release.time
         b1 = min(max(release.after[1], b0 + turn_s), span[1])
-        w = np.where(t > b0, 1.0 - _ease((t - b0) / max(b1 - b0, 1e-9)), w)
+        w = np.where(t > b0, 1.0 - ease((t - b0) / max(b1 - b0, 1e-9)), w)
     return np.asarray(w)
 
 

@@ -30,6 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
+from hsi_retarget.easing import ease
 from hsi_retarget.scene_distance import SceneDistance
 
 if TYPE_CHECKING:
@@ -145,11 +146,6 @@ def opened_part(schedule: Schedule, spec: Any, exclude: tuple[str, ...] = ()) ->
     )
 
 
-def _ease(u: F64) -> F64:
-    u = np.clip(u, 0.0, 1.0)
-    return np.asarray(10 * u**3 - 15 * u**4 + 6 * u**5)
-
-
 def follow_part(
     goals: RobotGoals, part: PartPhase, events: Sequence[ContactEvent], ease_s: float = 0.5
 ) -> RobotGoals:
@@ -166,8 +162,8 @@ def follow_part(
             continue
         if not part.t_open <= e.time < part.t_close:
             continue
-        rise = _ease((t - part.t_open) / max(e.time - part.t_open, 1e-9))
-        weight = np.where(t <= e.time, rise, 1.0 - _ease((t - e.time) / max(ease_s, 1e-9)))
+        rise = ease((t - part.t_open) / max(e.time - part.t_open, 1e-9))
+        weight = np.where(t <= e.time, rise, 1.0 - ease((t - e.time) / max(ease_s, 1e-9)))
         sel = np.flatnonzero(weight > 0.0)
         step = np.tile(np.eye(4), (sel.shape[0], 1, 1))
         step[:, :3, :3] = Rotation.from_rotvec(weight[sel, None] * rotvec[None, :]).as_matrix()

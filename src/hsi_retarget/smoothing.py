@@ -13,6 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hsi_planning.mocap import lowpass
+from hsi_retarget.easing import ease
 from hsi_retarget.human_motion import SIDES
 from hsi_retarget.ik import IKSolver
 from hsi_retarget.mapping import BASE_JOINTS, LIFT_JOINT
@@ -40,11 +41,6 @@ def smooth_joints(robot: RobotModel, t: F64, qs: F64, cutoff_hz: float) -> F64:
     return out
 
 
-def _ease(u: F64) -> F64:
-    u = np.clip(u, 0.0, 1.0)
-    return np.asarray(10 * u**3 - 15 * u**4 + 6 * u**5)
-
-
 def _bad_frames(
     solver: IKSolver, raw: F64, path: F64, check: NDArray[np.bool_], tolerance: float
 ) -> NDArray[np.bool_]:
@@ -64,7 +60,7 @@ def _window(t: F64, bad: NDArray[np.bool_], window_s: float) -> F64:
     weight = np.zeros(t.shape[0])
     for i in np.flatnonzero(bad):
         near = np.abs(t - t[i]) < window_s
-        weight[near] = np.maximum(weight[near], _ease(2.0 * (1.0 - np.abs(t[near] - t[i]) / window_s)))
+        weight[near] = np.maximum(weight[near], ease(2.0 * (1.0 - np.abs(t[near] - t[i]) / window_s)))
     return weight
 
 
