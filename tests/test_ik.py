@@ -3,6 +3,7 @@ humanoid feet and centre of mass, Jacobians against finite differences."""
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 import numpy as np
@@ -440,3 +441,31 @@ def test_the_base_turns_the_long_way_round_when_the_short_way_ends_past_its_yaw_
         assert robot.within_limits(q)
     assert turned[-1] > lower + 0.5  # under way the long way round, not pressed against the limit
     assert np.all(np.diff(turned) > -1e-9)
+
+
+def test_a_humanoid_keeps_its_thighs_off_the_furniture(robots: dict[str, RobotModel]) -> None:
+    """The thighs carry spheres (body group: measured without the floor, kept off the distal arms); a
+    counter front 3 cm before a thigh is the closest obstacle, and IK steps move the thigh away from it."""
+    from hsi_retarget.collision import GROUPS
+
+    robot = robots["humanoid"]
+    spheres = robot_spheres(robot)
+    thighs = np.array([i for i, f in enumerate(spheres.frames) if f.endswith("_thigh")])
+    assert thighs.size and np.all(spheres.groups[thighs] == GROUPS.index("body"))
+    assert not spheres.grounded[thighs].any()
+    assert not any("thigh" in f for f in robot_spheres(robots["dual_ur5e"]).frames)
+    solver = IKSolver(robot)
+    centres = solver.sphere_centers(robot.q_home)
+    front = float((centres[thighs, 0] + spheres.radii[thighs]).max())
+    counter = trimesh.creation.box(extents=(0.6, 2.0, 0.6))
+    counter.apply_translation((front + 0.03 + 0.3, 0.0, 0.3))  # its front 3 cm before the thighs, 60 cm high
+    solver = IKSolver(robot, IKConfig(self_collision=False), SceneDistance({"counter": counter}))
+    q = np.array(robot.q_home)
+    start = solver.clearance(q)
+    assert start == pytest.approx(0.03 - IKConfig().scene_margin, abs=0.002)  # a thigh is the closest
+    targets = IKTargets(root=_root(robot), feet=_feet(robot))
+    pelvis = np.array(_root(robot))
+    pelvis[0, 3] += 0.05  # the pelvis goal 5 cm into the counter: the thighs' rows hold the body back
+    for _ in range(30):
+        q, _ = solver.step(q, dataclasses.replace(targets, root=pelvis), 1.0 / 60.0)
+    assert solver.clearance(q) > -0.003

@@ -5,9 +5,11 @@ joint (upper arm, shoulder, mount; *proximal*: kept off the scene and the other 
 against the body they hang from) and every link from the elbow joint's link outwards (forearm, wrist,
 gripper body, and the fingers as *tip* spheres, which get a smaller scene margin since they must get close
 to what they grasp), and for the body the links that carry the arms (torso, pelvis/base) with their fixed
-children (head). A capsule/cylinder becomes spheres of its radius along its axis, a box spheres of its
-smallest half extent over its two larger axes (a finger box: columns of spheres along its longest axis,
-each through its part of the cross-section's corners, close enough that it sticks out at most 1.5 mm;
+children (head) and, on a floating robot, the jointed links hanging from them (a humanoid's thighs, which
+pass close to drawer fronts and counters). A capsule/cylinder becomes spheres of its radius along its
+axis, a box spheres of its smallest half extent over its two larger axes (a finger box: columns of
+spheres along its longest axis, each through its part of the cross-section's corners, close enough that
+it sticks out at most 1.5 mm;
 the box of a gripper's palm, which comes close to the other arm, is covered completely, corners included,
 by a grid of spheres bulging at most about 15 mm). Distances to the scene come from
 :class:`~hsi_retarget.scene_distance.SceneDistance`.
@@ -235,6 +237,13 @@ def robot_spheres(robot: RobotModel, max_per_axis: int = 12) -> SphereSet:
         if link.parent in carriers and not link.joints and link.group == "body"
     }
     selected += [(n, "body") for n in sorted(carriers)]
+    if robot.floating:  # a humanoid's thighs: they pass close to fronts and counters it stands at
+        legs = {
+            link.name
+            for link in desc.links
+            if link.parent in carriers and link.joints and link.group == "body" and link.name not in carriers
+        }
+        selected += [(n, "body") for n in sorted(legs)]
     finger_links = {link.name for link in desc.links if any(j.name in finger_joints for j in link.joints)}
     palms = {links[n].parent for n in finger_links}
     frame_ids, frames, centers, radii, groups, tips, proximal, fixed = [], [], [], [], [], [], [], []
