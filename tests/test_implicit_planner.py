@@ -173,6 +173,26 @@ def test_select_start_minimises_eq11_among_clear_connections() -> None:
     assert clear.tolist() == [False, False, False, True]
 
 
+def test_a_tall_carried_box_connects_level_under_a_board_then_vertically_outside() -> None:
+    # a board (underside at z = 1.0 m) from x = 0.5 m on; a held box 0.05..0.15 m ahead of the wrist and
+    # +-0.1 m in height: at the candidate (wrist z 0.85 m) its top is 5 cm under the board, at the anchor
+    # outside (z 0.95 m) it stands higher than the board's underside
+    board = np.stack(
+        np.meshgrid(np.arange(0.5, 1.0, 0.01), np.arange(-0.3, 0.3, 0.01), [1.0, 1.02]), -1
+    ).reshape(-1, 3)
+    carried = np.array([[x, y, z] for x in (0.05, 0.15) for y in (-0.03, 0.03) for z in (-0.1, 0.1)])
+    config = argparse.Namespace(hand_radius=0.04)
+    ctx: Any = argparse.Namespace(config=config, carried=carried, clearance=Clearance(board))
+    anchor, x = np.array([0.2, 0.0, 0.95]), np.array([[0.8, 0.0, 0.85], [0.8, 0.0, 1.1]])
+    corner = segment_module._waypoint(anchor, x)
+    np.testing.assert_allclose(corner, [[0.2, 0.0, 0.85], [0.2, 0.0, 1.1]])  # vertical at the anchor
+    straight = segment_module._connect_clear(ctx, anchor, True, 0.01)
+    assert straight(x[:1]).tolist() == [False]  # the box's top front corner cuts the board's edge
+    assert segment_module._connect_clear(ctx, anchor, True, 0.01, up=True)(x[:1]).tolist() == [True]
+    over = segment_module._connect_clear(ctx, anchor, False, 0.01, up=True)  # the empty hand: up and over
+    assert over(x[1:]).tolist() == [True]
+
+
 def test_approach_axis_estimate_points_out_of_the_opening() -> None:
     cloud = scene_cloud()
     target = cloud.points[cloud.labels == 2]

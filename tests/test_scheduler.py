@@ -22,6 +22,7 @@ from scipy.spatial.transform import Rotation
 
 from hsi_planning.errors import HsiError, PlanningError
 from hsi_planning.scene import SceneSpec, object_pose
+from hsi_planning.scene.model import support_surfaces
 from hsi_planning.scene_paths import load_scene
 from hsi_planning.scheduler import (
     AuxiliaryConfig,
@@ -34,7 +35,7 @@ from hsi_planning.scheduler import (
     Task,
     find_blockers,
 )
-from hsi_planning.scheduler.world import WorldState
+from hsi_planning.scheduler.world import WorldState, label_points
 
 ARM_REACH = 0.75
 BODY_RADIUS = 0.25
@@ -271,6 +272,22 @@ def test_blocker_moved_first_then_target_then_put_back(
     carried = [(c["object"], "place" in c) for c in s.info["carries"]]  # the can is not put down here
     assert carried == [("bottle1", True), ("can1", False), ("bottle1", True)]
     np.testing.assert_allclose(s.info["carries"][2]["place"][:2], home[:2], atol=0.02)
+
+
+def test_a_tall_blocker_is_taken_out_until_all_of_it_is_past_the_opening(
+    scenarios: dict[str, Schedule], narrow: SceneWorld
+) -> None:
+    # the bottle (30 cm tall, 3 cm under the board above) is held by its near side: the take-out ends
+    # retreat_clearance beyond the shelf front with the whole bottle, not only the wrist, out of the shelf
+    s = scenarios["blocked"]
+    out = next(seg.trajectory for seg in s.segments if seg.step == "take_out")  # the blocker's, first
+    surface = support_surfaces(narrow.spec)["shelf1/board1"]
+    axis = np.asarray(surface.opening, dtype=np.float64)
+    front = surface.frame[:3, 3] + surface.half_extents[0] * axis
+    pts = label_points(narrow.cloud(), ["bottle1"])
+    moved = pts + (out.position[-1] - out.position[out.contact_index])
+    assert float(((pts - front) @ axis).min()) < -0.05  # it stood deep in the shelf
+    assert float(((moved - front) @ axis).min()) >= SchedulerConfig().retreat_clearance - 0.01
 
 
 def test_unknown_or_held_target_and_no_free_hand(kitchen: SceneWorld) -> None:

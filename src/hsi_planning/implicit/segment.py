@@ -119,10 +119,12 @@ def _keep_above_lift(path: F64, ctx: SegmentContext) -> F64:
 
 
 def _waypoint(anchor: F64, x: F64) -> F64:
-    """(N, 3) [m] the corner of an up-and-over connection anchor → waypoint → x (N, 3): straight up (or
-    not at all) from ``anchor`` to the height of each x."""
+    """(N, 3) [m] the corner of a vertical-then-level connection anchor → waypoint → x (N, 3): straight up
+    or down from ``anchor`` to the height of each x, then level to it (up and over a drawer front or a
+    board; or, for a tall object carried under a board, level out of the opening and then up/down
+    outside it)."""
     w = np.repeat(anchor[None], x.shape[0], axis=0)
-    w[:, 2] = np.maximum(anchor[2], x[:, 2])
+    w[:, 2] = x[:, 2]
     return w
 
 
@@ -130,8 +132,8 @@ def _connect_clear(
     ctx: SegmentContext, anchor: F64, carrying: bool, margin: float, up: bool = False
 ) -> Callable[[F64], NDArray[np.bool_]]:
     """(B, 3) start candidates → (B,) whether the connection from ``anchor`` is clear: a straight segment,
-    or with ``up`` the up-and-over polyline of :func:`_waypoint`; the hand sphere (radius + ``margin``)
-    and, ``carrying``, the corners of the held object's box (``margin``)."""
+    or with ``up`` the vertical-then-level polyline of :func:`_waypoint`; the hand sphere (radius +
+    ``margin``) and, ``carrying``, the corners of the held object's box (``margin``)."""
     radius = ctx.config.hand_radius + margin
     offsets = [(np.zeros(3), radius)]
     if carrying:
@@ -222,7 +224,8 @@ def _descend(
     """(path in approach order, speeds [m/s], length [m] descended on ``phi``) from Eq. 11's start point
     down ∇φ to the contact. Where the descent stalls (a local minimum), it continues on ``finish()``
     (the repaired field) when given. With ``connect`` the path starts at ``anchor`` (a straight, clear
-    connection, else straight up first and then straight over: a drawer front or board in the way),
+    connection, else vertically to the start point's height first and then level: a drawer front or
+    board in the way, or a tall carried object under a board),
     else at the start point. Eq. 11's candidates lie in the prior's time corridor; unless
     ``capped``, a corridor ``_WIDE_CAP`` times as long is tried when none of them connects (a repaired
     field's times grow slowly off the corridor), and when none of those does either, the descent starts
@@ -278,7 +281,7 @@ def _descend(
         )
     tail = [ctx.contact + np.array([0.0, 0.0, lift])] if lift > 0.0 else []
     head = [anchor[None]] if connect and not at_anchor else []
-    if connect and up and not at_anchor and start[2] > anchor[2]:
+    if connect and up and not at_anchor and abs(start[2] - anchor[2]) > 1e-9:
         head.append(_waypoint(anchor, start[None]))
     path = np.vstack([*head, *(p for _, p in parts), *tail, ctx.contact[None]])
     speeds = [np.full(len(head), mean_speed)]

@@ -139,7 +139,12 @@ def _axes(
     return best[1]
 
 
-def _retreats(run: TaskRun, contacts: dict[Hand, F64], axis: F64, support_name: str) -> dict[Hand, F64]:
+def _retreats(
+    run: TaskRun, contacts: dict[Hand, F64], axis: F64, support_name: str, held: F64 | None = None
+) -> dict[Hand, F64]:
+    """Free wrist poses after a front or top access: out of the opening by ``retreat_clearance`` beyond
+    the deepest of the wrist and, taking it out, the ``held`` object's points (M, 3) [m] (a tall bottle
+    reaches deeper into the shelf than the wrist that holds it by its near side)."""
     c = run.config
     if len(contacts) == 2:
         towards = run.timeline.hip.position - np.mean(list(contacts.values()), axis=0)
@@ -154,6 +159,8 @@ def _retreats(run: TaskRun, contacts: dict[Hand, F64], axis: F64, support_name: 
         else:
             front = support.frame[:3, 3] + support.half_extents[0] * support.opening
             depth = max(0.0, float((front - p) @ axis))
+            if held is not None and len(held):
+                depth = max(depth, float(((front - held) @ axis).max()))
             out[h] = free_pose(p, axis, depth + c.retreat_clearance)
     return out
 
@@ -215,7 +222,7 @@ def grasp(run: TaskRun, obj: str, hands: tuple[Hand, ...]) -> None:
     axis = approach_axis(run.world, support)
     axes = _axes(run, axis, pts, hands, cloud=cloud, obj=obj)
     contacts = {h: contact_from_points(pts, a, c.auxiliary.palm_offset)[0] for h, a in axes.items()}
-    retreats = _retreats(run, contacts, axis, support.name)
+    retreats = _retreats(run, contacts, axis, support.name, held=pts)
     targets = [StanceTarget(h, p) for h in hands for p in (contacts[h], retreats[h])]
     floor = run.floor()
     stance = run.stance([*targets, *run.holds()], floor)
