@@ -274,20 +274,32 @@ def test_blocker_moved_first_then_target_then_put_back(
     np.testing.assert_allclose(s.info["carries"][2]["place"][:2], home[:2], atol=0.02)
 
 
-def test_a_tall_blocker_is_taken_out_until_all_of_it_is_past_the_opening(
-    scenarios: dict[str, Schedule], narrow: SceneWorld
-) -> None:
-    # the bottle (30 cm tall, 3 cm under the board above) is held by its near side: the take-out ends
-    # retreat_clearance beyond the shelf front with the whole bottle, not only the wrist, out of the shelf
-    s = scenarios["blocked"]
+def _take_out_reach(world: SceneWorld, obj: str) -> tuple[float, float]:
+    """[m] how far past the front of the shelf the deepest point of ``obj`` lies before and after its
+    first take-out in the schedule of picking can1 (negative: inside)."""
+    s = _schedule(world, "can1")
     out = next(seg.trajectory for seg in s.segments if seg.step == "take_out")  # the blocker's, first
-    surface = support_surfaces(narrow.spec)["shelf1/board1"]
+    surface = support_surfaces(world.spec)["shelf1/board1"]
     axis = np.asarray(surface.opening, dtype=np.float64)
     front = surface.frame[:3, 3] + surface.half_extents[0] * axis
-    pts = label_points(narrow.cloud(), ["bottle1"])
+    pts = label_points(world.cloud(), [obj])
     moved = pts + (out.position[-1] - out.position[out.contact_index])
-    assert float(((pts - front) @ axis).min()) < -0.05  # it stood deep in the shelf
-    assert float(((moved - front) @ axis).min()) >= SchedulerConfig().retreat_clearance - 0.01
+    return float(((pts - front) @ axis).min()), float(((moved - front) @ axis).min())
+
+
+def test_a_tall_blocker_is_taken_out_until_all_of_it_is_past_the_opening(narrow: SceneWorld) -> None:
+    # a bottle 29 cm tall, 4 cm under the board above, held by its near side: it cannot rise as far as
+    # the retreat does while any of it is under the board; the take-out ends retreat_clearance beyond the
+    # shelf front with the whole bottle, not only the wrist, out of the shelf
+    doc = narrow.spec.to_dict()
+    bottle = next(o for o in doc["objects"] if o["name"] == "bottle1")
+    bottle["scale"] = 1.15
+    inside, after = _take_out_reach(SceneWorld(SceneSpec.from_dict(doc)), "bottle1")
+    assert inside < -0.05  # it stood deep in the shelf
+    assert after >= SchedulerConfig().retreat_clearance - 0.01
+    # the default bottle (25 cm) has room to rise in place: its take-out ends as far out as the wrist's
+    inside, after = _take_out_reach(narrow, "bottle1")
+    assert inside < -0.05 and after < SchedulerConfig().retreat_clearance - 0.05
 
 
 def test_unknown_or_held_target_and_no_free_hand(kitchen: SceneWorld) -> None:

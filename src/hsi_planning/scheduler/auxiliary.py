@@ -42,6 +42,7 @@ _LOG = logging.getLogger(__name__)
 F64 = NDArray[np.float64]
 _UP = np.array([0.0, 0.0, 1.0])
 _FRONT_ACCESS = ("cabinet", "shelf")
+FRONT_RISE = 0.05  #: [m] how much higher than the contact a free wrist pose out of a front opening lies
 
 
 @dataclass(frozen=True)
@@ -112,7 +113,7 @@ def free_pose(contact: ArrayLike, axis: ArrayLike, distance: float) -> F64:
     c, a = np.asarray(contact, dtype=np.float64), np.asarray(axis, dtype=np.float64)
     if abs(a[2]) > 0.9:
         return np.asarray(c + distance * _UP)
-    return np.asarray(c + distance * a + 0.05 * _UP)
+    return np.asarray(c + distance * a + FRONT_RISE * _UP)
 
 
 def _inside(points: F64, support: SupportSurface, axis: F64) -> NDArray[np.bool_]:

@@ -28,7 +28,7 @@ from hsi_planning.scene.geometry import support_of
 from hsi_planning.scene.model import support_surface
 from hsi_planning.scene.objects import DEFAULTS
 from hsi_planning.scheduler.actions import TaskRun
-from hsi_planning.scheduler.auxiliary import approach_axis, free_pose
+from hsi_planning.scheduler.auxiliary import FRONT_RISE, approach_axis, free_pose
 from hsi_planning.scheduler.reach_planner import contact_from_points
 from hsi_planning.scheduler.stance import StanceTarget
 from hsi_planning.scheduler.world import WorldState, label_points
@@ -36,6 +36,8 @@ from hsi_planning.trajectory import Action, Hand, WristTrajectory
 
 F64 = NDArray[np.float64]
 _UP = np.array([0.0, 0.0, 1.0])
+#: [m] room beyond the retreat's rise that a held object needs under the board above it to rise in place
+_TALL_ROOM = 0.02
 #: [m] points of a round object farther than this outside its fitted cylinder are a protrusion (handle).
 _HANDLE_GAP = 0.01
 #: [-] fraction of 10-degree sectors around a round object's fitted axis its points must cover for the
@@ -143,8 +145,10 @@ def _retreats(
     run: TaskRun, contacts: dict[Hand, F64], axis: F64, support_name: str, held: F64 | None = None
 ) -> dict[Hand, F64]:
     """Free wrist poses after a front or top access: out of the opening by ``retreat_clearance`` beyond
-    the deepest of the wrist and, taking it out, the ``held`` object's points (M, 3) [m] (a tall bottle
-    reaches deeper into the shelf than the wrist that holds it by its near side)."""
+    the wrist, slightly raised. Taking out an object that cannot rise that much under the board above
+    it (``held``: its points (M, 3) [m]; headroom below the rise + ``_TALL_ROOM``), beyond the deepest of
+    its points instead: a tall bottle reaches deeper into the shelf than the wrist holding it by its near
+    side, and only clears the board once all of it is out."""
     c = run.config
     if len(contacts) == 2:
         towards = run.timeline.hip.position - np.mean(list(contacts.values()), axis=0)
@@ -160,7 +164,9 @@ def _retreats(
             front = support.frame[:3, 3] + support.half_extents[0] * support.opening
             depth = max(0.0, float((front - p) @ axis))
             if held is not None and len(held):
-                depth = max(depth, float(((front - held) @ axis).max()))
+                headroom = support.top_z + support.ceiling - float(held[:, 2].max())
+                if headroom < FRONT_RISE + _TALL_ROOM:
+                    depth = max(depth, float(((front - held) @ axis).max()))
             out[h] = free_pose(p, axis, depth + c.retreat_clearance)
     return out
 
