@@ -156,17 +156,20 @@ def _retreats(
         towards /= max(float(np.linalg.norm(towards)), 1e-9)
         return {h: p + c.lift_height * 2.0 * _UP + 0.15 * towards for h, p in contacts.items()}
     support = support_surface(run.world.spec, support_name)
+    front = support.frame[:3, 3] + support.half_extents[0] * support.opening
+    deepest = 0.0  # [m] how far behind the front the held object reaches when it cannot rise in place
+    if (
+        held is not None
+        and len(held)
+        and support.top_z + support.ceiling - float(held[:, 2].max()) < FRONT_RISE + _TALL_ROOM
+    ):
+        deepest = float(((front - held) @ axis).max())
     out = {}
     for h, p in contacts.items():
         if abs(axis[2]) > 0.9:
             out[h] = free_pose(p, axis, c.retreat_clearance + 0.1)
         else:
-            front = support.frame[:3, 3] + support.half_extents[0] * support.opening
-            depth = max(0.0, float((front - p) @ axis))
-            if held is not None and len(held):
-                headroom = support.top_z + support.ceiling - float(held[:, 2].max())
-                if headroom < FRONT_RISE + _TALL_ROOM:
-                    depth = max(depth, float(((front - held) @ axis).max()))
+            depth = max(0.0, float((front - p) @ axis), deepest)
             out[h] = free_pose(p, axis, depth + c.retreat_clearance)
     return out
 
