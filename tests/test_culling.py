@@ -14,9 +14,11 @@ import pytest
 from hsi_planning.errors import RetargetError
 from hsi_planning.scene import scene_meshes
 from hsi_planning.scene_paths import load_scene
+from hsi_retarget.candidates import find_candidates
 from hsi_retarget.collision import collision_rows, min_gap
 from hsi_retarget.culling import LinkBounds
 from hsi_retarget.ik import IKConfig, IKSolver
+from hsi_retarget.path_clearance import path_gaps
 from hsi_retarget.robots import RobotModel
 from hsi_retarget.scene_distance import SceneDistance
 
@@ -103,6 +105,106 @@ def test_culled_rows_and_clearance_equal_the_full_check(name: str, kitchen: Scen
     assert compared >= 10
     with pytest.raises(RetargetError, match="repeated"):
         LinkBounds(spheres, np.vstack([pairs, pairs[:1]]))
+
+
+class _HalfSpace:
+    """An obstacle filling the half-space beyond a plane through ``point`` facing ``-normal``: exact
+    distances, and lower bounds equal to them (the tightest a scene's bound can be)."""
+
+    def __init__(self, point: np.ndarray, normal: np.ndarray) -> None:
+        self.point, self.normal = point, normal / np.linalg.norm(normal)
+
+    def query(self, points: np.ndarray, grounded: object = None) -> tuple[np.ndarray, np.ndarray]:
+        points = np.asarray(points).reshape(-1, 3)
+        return (self.point - points) @ self.normal, np.tile(-self.normal, (points.shape[0], 1))
+
+    def lower_bound(self, points: np.ndarray, grounded: object = None) -> np.ndarray:
+        return self.query(points)[0]
+
+
+@pytest.mark.parametrize("name", ["dual_ur5e", "humanoid"])
+def test_a_link_is_kept_by_the_largest_margin_of_its_spheres(name: str) -> None:
+    """A link's bounding sphere is culled only when none of its spheres can be within reach of its own
+    margin: with the finger tips' smaller margin as the link's reach, a wrist sphere that cuts into its
+    scene margin was culled (found on a cabinet top: reported clear, 3 mm inside)."""
+    robot = RobotModel(name)
+    config = IKConfig(candidate_slack=0.0)
+    solver = IKSolver(robot, config)
+    spheres, bounds = solver.spheres, solver._bounds
+    pin.framesForwardKinematics(robot.model, solver._data, np.array(robot.q_home))
+    links, centers = bounds.world(solver._data, spheres)
+    margins = (config.scene_margin, config.tip_margin, config.self_margin)
+    reach, checked = 0.0, 0
+    for f in range(links.shape[0]):
+        own = np.flatnonzero(bounds.owner == f)
+        off = np.linalg.norm(centers[own] - links[f], axis=1)
+        k = int(own[np.argmax(off + spheres.radii[own])])  # the sphere on the bound's surface
+        if spheres.tips[k] or off.max() < 1e-3:
+            continue
+        normal = (centers[k] - links[f]) / np.linalg.norm(centers[k] - links[f])
+        wall = _HalfSpace(
+            centers[k] + normal * (spheres.radii[k] + config.scene_margin + reach - 1e-3), normal
+        )
+        layers = [(wall, spheres.everyone)]
+        kwargs = dict(margins=margins, activation=reach, links=links)
+        full = find_candidates(
+            spheres, centers, np.zeros((0, 2), np.int64), layers, spheres.grounded, bounds=None, **kwargs
+        )  # type: ignore[arg-type]
+        culled = find_candidates(
+            spheres, centers, np.zeros((0, 2), np.int64), layers, spheres.grounded, bounds=bounds, **kwargs
+        )  # type: ignore[arg-type]
+        assert k in full[0] and set(full[0].tolist()) == set(culled[0].tolist()), spheres.frames[k]
+        along = path_gaps(
+            spheres,
+            centers[None],
+            links[None],
+            np.zeros((0, 2), np.int64),
+            layers,
+            margins=margins,
+            reach=reach,
+            bounds=bounds,
+        )  # type: ignore[arg-type]
+        assert along[0] == pytest.approx(float(full[2].min()), abs=1e-12)  # the path check: the same rule
+        checked += 1
+    assert checked >= 4
+
+
+@pytest.mark.parametrize("name", ["dual_ur5e", "humanoid"])
+def test_tight_clearances_culled_alone_and_along_a_path_equal_the_full_check(
+    name: str, kitchen: SceneDistance
+) -> None:
+    """Without the cache's extra reach (a superset) the culling alone must keep every sphere that may cut
+    into its margin: a link is kept by the largest margin of its spheres (the scene margin, not the finger
+    tips' smaller one). Whole paths (:meth:`IKSolver.clearances`) give the same numbers."""
+    robot = RobotModel(name)
+    config = IKConfig(candidate_slack=0.0)
+    solver = IKSolver(robot, config, kitchen)
+    assert solver._cache is None
+    spheres, pairs = solver.spheres, solver.spheres.pairs()
+    margins = (config.scene_margin, config.tip_margin, config.self_margin)
+    rng = np.random.default_rng(17)
+    qs = np.tile(robot.q_home, (150, 1))
+    for q in qs:
+        for side in ("left", "right"):
+            idx = robot.arm_q_indices(side)
+            q[idx] = np.clip(
+                q[idx] + rng.uniform(-1.2, 1.2, idx.shape[0]), robot.q_lower[idx], robot.q_upper[idx]
+            )
+        for joint in ("base_x_joint", "base_y_joint"):
+            if joint in robot.joint_names:  # among the kitchen's furniture
+                q[robot.q_index(joint)] = rng.uniform(0.5, 3.0)
+    exact = np.array([min_gap(spheres, solver.sphere_centers(q), pairs, kitchen, margins) for q in qs])
+    cuts = 0
+    for within in (-0.002, 0.0, 0.01):
+        expected = np.where(exact < within, exact, np.inf)
+        alone = np.array([solver.clearance(q, within=within) for q in qs])
+        np.testing.assert_allclose(alone, expected, atol=1e-9, rtol=0.0)
+        np.testing.assert_array_equal(solver.clearances(qs, within=within), alone)
+        cuts += int(np.isfinite(expected).sum())
+    assert cuts > 30  # configurations that cut into a margin were checked
+    np.testing.assert_array_equal(solver.clearances(qs[:0]), np.zeros(0))
+    with pytest.raises(RetargetError, match="reach must be finite"):
+        solver.clearances(qs[:2], within=math.inf)
 
 
 def test_cached_candidates_give_the_same_rows_and_clearances_along_a_path(kitchen: SceneDistance) -> None:

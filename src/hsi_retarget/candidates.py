@@ -177,7 +177,8 @@ def _cull(
     (scene, tip, self margins [m]), reach): the links' bounding spheres, then each sphere's lower bound
     (scene), the pairs' centre distances (self)."""
     (scene_margin, tip_margin, self_margin), reach = within
-    link_reach = reach + min(tip_margin, scene_margin)
+    # a link is kept by the largest margin of its spheres (a wrist sphere's scene margin, not a tip's)
+    link_reach = reach + max(tip_margin, scene_margin)
     scene = []
     for layer, mask in layers:
         check = np.flatnonzero(mask & bounds.scene_candidates(layer, links, link_reach))

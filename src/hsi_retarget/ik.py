@@ -29,6 +29,7 @@ from hsi_retarget.collision import GROUPS, SceneLayer, collision_rows, min_gap, 
 from hsi_retarget.culling import LinkBounds
 from hsi_retarget.humanoid_ik import SupportConfig, support_rows
 from hsi_retarget.mapping import BASE_JOINTS, LIFT_JOINT
+from hsi_retarget.path_clearance import path_gaps
 from hsi_retarget.qp import solve_qp
 from hsi_retarget.robots import RobotModel
 from hsi_retarget.scene_distance import SceneDistance
@@ -439,6 +440,25 @@ class IKSolver:
             cache=self._cache,
         )
         return gap if gap < reach else math.inf
+
+    def clearances(self, qs: F64, within: float | None = None) -> F64:
+        """(N,) [m] :meth:`clearance` of each configuration of ``qs`` (N, nq), the same numbers, culled for
+        all at once (:mod:`hsi_retarget.path_clearance`)."""
+        cfg = self.config
+        reach = cfg.activation_distance if within is None else float(within)
+        qs = np.asarray(qs, dtype=np.float64).reshape(-1, self.robot.nq)
+        centers = np.empty((qs.shape[0], self.spheres.radii.shape[0], 3))
+        links = np.empty((qs.shape[0], self._bounds.radii.shape[0], 3))
+        for i, q in enumerate(qs):
+            pin.framesForwardKinematics(self._model, self._data, q)
+            links[i], centers[i] = self._bounds.world(self._data, self.spheres)
+        pairs = self._pairs if cfg.self_collision else np.zeros((0, 2), dtype=np.int64)
+        layers = [] if self.scene is None else [(self.scene, self.spheres.everyone)]
+        layers += [] if self._layer is None else [self._layer]
+        margins = (cfg.scene_margin, cfg.tip_margin, cfg.self_margin)
+        return path_gaps(
+            self.spheres, centers, links, pairs, layers, margins=margins, reach=reach, bounds=self._bounds
+        )
 
     def clearance_bound(self, q_from: F64, q_to: F64, clearance_from: float) -> float:
         """[m] a lower bound of :meth:`clearance` at ``q_to`` (nq,) from its value ``clearance_from`` [m]

@@ -47,10 +47,9 @@ def _bad_frames(
     """(T,) frames of ``check`` where ``path`` is closer than ``-tolerance`` to its margins and than the
     raw solution's clearance minus ``tolerance`` [m]."""
     bad = np.zeros(path.shape[0], dtype=bool)
-    for i in np.flatnonzero(check):
-        if np.allclose(raw[i], path[i], atol=1e-6):
-            continue
-        c = solver.clearance(path[i], within=-tolerance)  # inf unless it cuts deeper than tolerance
+    moved = np.flatnonzero(check & ~np.isclose(raw, path, atol=1e-6).all(axis=1))
+    cut = solver.clearances(path[moved], within=-tolerance)  # inf unless it cuts deeper than tolerance
+    for i, c in zip(moved, cut, strict=True):
         bad[i] = c < -tolerance and c < solver.clearance(raw[i]) - tolerance
     return bad
 
