@@ -291,6 +291,7 @@ def collision_rows(
     extra: SceneLayer | None = None,
     cache: CandidateCache | None = None,
     extra_margin: F64 | None = None,
+    world: tuple[F64, F64] | None = None,
 ) -> tuple[F64, F64, float]:
     """Linearized clearance constraints ``A dq >= lower`` for one IK step.
 
@@ -303,10 +304,15 @@ def collision_rows(
     (built from the same spheres) skips the links that cannot be near the scene (same result, cheaper).
     ``extra`` = (scene, spheres (S,) that heed it): one more scene, e.g. an opened door that one hand
     holds. ``cache`` keeps the culled candidates across calls (:mod:`hsi_retarget.candidates`; same
-    result). ``extra_margin`` (S,) [m], >= 0: more scene margin per sphere. Returns A (k, nv), lower (k,)
-    and the smallest gap [m] (``inf`` without candidates).
+    result). ``extra_margin`` (S,) [m], >= 0: more scene margin per sphere. ``world``: ``bounds.world`` of
+    ``data`` when already computed. Returns A (k, nv), lower (k,) and the smallest gap [m] (``inf`` without
+    candidates).
     """
-    links, centers = bounds.world(data, spheres) if bounds is not None else (None, spheres.world(data))
+    links: F64 | None
+    if world is not None and bounds is not None:
+        links, centers = world
+    else:
+        links, centers = bounds.world(data, spheres) if bounds is not None else (None, spheres.world(data))
     ia, ib, gaps, dirs = find_candidates(
         spheres,
         centers,
@@ -380,10 +386,16 @@ def _point_rows(
     used = idx >= 0
     if not used.any():
         return rows
-    unique, inverse = np.unique(spheres.frame_ids[idx[used]], return_inverse=True)
     frame = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
-    jac = np.stack([np.asarray(pin.getFrameJacobian(model, data, int(f), frame)) for f in unique])[inverse]
-    origin = np.stack([np.asarray(data.oMf[int(f)].translation) for f in unique])[inverse]
+    fids = spheres.frame_ids[idx[used]].tolist()
+    jac, origin = np.empty((len(fids), 6, model.nv)), np.empty((len(fids), 3))
+    seen: dict[int, int] = {}  # frame -> its first row (each frame's Jacobian is read once)
+    for k, f in enumerate(fids):
+        if f in seen:
+            jac[k], origin[k] = jac[seen[f]], origin[seen[f]]
+        else:
+            seen[f] = k
+            jac[k], origin[k] = pin.getFrameJacobian(model, data, f, frame), data.oMf[f].translation
     d = dirs[used]
     r = centers[idx[used]] - origin
     lever = np.column_stack(  # d x r (np.cross's formula, without its overhead): d . (w x r) = -(d x r) . w

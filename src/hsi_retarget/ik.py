@@ -36,6 +36,7 @@ from hsi_retarget.scene_distance import SceneDistance
 
 F64 = NDArray[np.float64]
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+_WORLD_MEMO = 4  #: [-] configurations whose sphere centres :meth:`IKSolver._world` keeps
 
 
 @dataclass(frozen=True)
@@ -196,6 +197,7 @@ class IKSolver:
         }
         slack = self.config.candidate_slack
         self._cache = CandidateCache(slack) if slack > 0.0 else None
+        self._world_memo: dict[bytes, tuple[F64, F64]] = {}
         self._v_max = np.array(robot.v_max)
         self._jq = np.array([robot.q_index(n) for n in robot.joint_names], dtype=np.int64)
         self._jv = np.array([robot.v_index(n) for n in robot.joint_names], dtype=np.int64)
@@ -341,6 +343,7 @@ class IKSolver:
             extra=self._layer,
             cache=self._cache,
             extra_margin=extra,
+            world=self._world(q, posed=True),
         )
 
     # ------------------------------------------------------------------------------------ solving
@@ -412,10 +415,26 @@ class IKSolver:
             rows, lo, hi = rows[:0], lo[:0], hi[:0]
         return solve_qp(hess, grad, rows, row_bounds=(lo, hi), box=(lbx, ubx))
 
+    def _world(self, q: F64, *, posed: bool = False) -> tuple[F64, F64]:
+        """(F, 3) link bounding centres and (S, 3) sphere centres [m] at ``q`` (nq,), read-only, from the
+        last few configurations asked for (an IK step, its clearance checks and the next step share one
+        configuration). ``posed``: ``self._data`` already holds the frame placements of ``q``."""
+        key = np.asarray(q, dtype=np.float64).tobytes()
+        hit = self._world_memo.get(key)
+        if hit is None:
+            if not posed:
+                pin.framesForwardKinematics(self._model, self._data, np.asarray(q, dtype=np.float64))
+            hit = self._bounds.world(self._data, self.spheres)
+            for a in hit:
+                a.flags.writeable = False
+            if len(self._world_memo) >= _WORLD_MEMO:
+                self._world_memo.pop(next(iter(self._world_memo)))
+            self._world_memo[key] = hit
+        return hit
+
     def sphere_centers(self, q: F64) -> F64:
         """(S, 3) [m] world centres of :attr:`spheres` at ``q`` (nq,)."""
-        pin.framesForwardKinematics(self._model, self._data, np.asarray(q, dtype=np.float64))
-        return self._bounds.world(self._data, self.spheres)[1]
+        return np.array(self._world(q)[1])
 
     def clearance(self, q: F64, within: float | None = None) -> float:
         """[m] smallest sphere clearance minus its margin (scene and self) at ``q``; ``inf`` when every pair
@@ -425,8 +444,7 @@ class IKSolver:
         reach = cfg.activation_distance if within is None else float(within)
         pairs = self._pairs if cfg.self_collision else np.zeros((0, 2), dtype=np.int64)
         margins = (cfg.scene_margin, cfg.tip_margin, cfg.self_margin)
-        pin.framesForwardKinematics(self._model, self._data, np.asarray(q, dtype=np.float64))
-        links, centers = self._bounds.world(self._data, self.spheres)
+        links, centers = self._world(q)
         gap = min_gap(
             self.spheres,
             centers,
@@ -464,7 +482,7 @@ class IKSolver:
         """[m] a lower bound of :meth:`clearance` at ``q_to`` (nq,) from its value ``clearance_from`` [m]
         at ``q_from`` (nq,): no sphere moved farther than the largest centre displacement, and a gap
         between two spheres closes by at most twice that (distances are 1-Lipschitz)."""
-        moved = float(np.linalg.norm(self.sphere_centers(q_to) - self.sphere_centers(q_from), axis=1).max())
+        moved = float(np.linalg.norm(self._world(q_to)[1] - self._world(q_from)[1], axis=1).max())
         return clearance_from - 2.0 * moved
 
     def errors(self, q: F64, targets: IKTargets) -> tuple[dict[str, float], dict[str, float]]:

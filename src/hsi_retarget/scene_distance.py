@@ -106,10 +106,10 @@ class SceneDistance:
         ans = (self._scene if scene is None else scene).compute_closest_points(
             o3d.core.Tensor.from_numpy(np.ascontiguousarray(pts, dtype=np.float32))
         )
-        closest = ans["points"].numpy().astype(np.float64)
+        closest = ans["points"].numpy()  # float32: the subtraction below widens it exactly
         tri_normal = ans["primitive_normals"].numpy().astype(np.float64)
         delta = pts - closest
-        dist = np.linalg.norm(delta, axis=1)
+        dist = np.sqrt(np.add.reduce(delta * delta, axis=1))  # np.linalg.norm(axis=1) without its wrapper
         # inside: the point lies behind the closest triangle's plane (a point outside next to an edge can get
         # the other face's triangle, with a slightly negative dot product: not inside)
         side = np.where(np.einsum("ij,ij->i", delta, tri_normal) < -0.5 * dist, -1.0, 1.0)
