@@ -20,10 +20,6 @@ from scipy.spatial.transform import Rotation
 from hsi_retarget.robots.description import Joint, Link, Mat4, RobotDescription
 
 TIMESTEP = 0.002  #: simulation time step [s], same as the scenes
-#: Root anchor weld (the humanoid's pelvis following its planned path): time constant [s] (>= 2 time steps)
-#: and damping ratio [-]. At 0.02 s the pelvis leaned 0.02 rad under the reaching arm, 1.5 cm at the hand
-#: (a grasp 1.5 cm off what the IK planned, the object placed 2 cm off); at 0.005 s, 0.002 rad and 5 mm.
-ANCHOR_SOLREF = (0.005, 1.0)
 #: (contype, conaffinity) per collision group.
 COLLISION_BITS = {"body": (2, 1), "left": (4, 1 | 8), "right": (8, 1 | 4)}
 
@@ -153,7 +149,7 @@ def build_robot_mjcf(desc: RobotDescription) -> str:
             body2=base.name,
             relpose="0 0 0 1 0 0 0",
             active="false",
-            solref=_num(ANCHOR_SOLREF),
+            solref="0.02 1",
         )
     actuator = ET.SubElement(root, "actuator")
     for j in desc.joints:
