@@ -232,6 +232,7 @@ def test_cached_candidates_give_the_same_rows_and_clearances_along_a_path(kitche
         near += rows[0][0].shape[0] > 0
     assert near > 50  # the rows were not all empty
     assert cached._cache.hits > 100 and 5 < cached._cache.misses < 150
+    assert cached._cache.skipped > 100  # spheres the distances at the misses left unmeasured
     holder = SceneDistance.from_spec(load_scene("kitchen"))
     cached.set_part_scene(holder, "left")  # another scene layer: chosen anew
     misses = cached._cache.misses

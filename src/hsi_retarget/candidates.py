@@ -6,7 +6,9 @@ block of pair-centre distances) costs more than measuring the few it leaves. Dis
 the choice made with ``slack`` [m] more reach holds until some sphere centre has moved ``slack / 2`` (a
 pair's gap closes by at most twice that): :class:`CandidateCache` reuses it until then. The candidates
 measured are a superset of the uncached ones and the result is the same, only cheaper (a few IK steps
-and frames share one choice).
+and frames share one choice). The cache also keeps the exact scene distances measured at the miss: a
+sphere that cannot have come within reach since (its distance then minus the way it moved) is not
+measured again.
 """
 
 from __future__ import annotations
@@ -52,8 +54,11 @@ class CandidateCache:
         self._centers = np.zeros((0, 3))
         self._activation = -np.inf
         self._picks: _Picks | None = None
+        #: exact distances [m] of each layer's picked spheres at ``_centers`` (measured once, at the miss)
+        self._dist: list[F64 | None] = []
         self.hits = 0  #: [-] lookups answered from the cache
         self.misses = 0  #: [-] lookups that chose anew
+        self.skipped = 0  #: [-] picked spheres left unmeasured: too far by their distance at the miss
 
     def _lookup(self, key: tuple[object, ...], centers: F64, activation: float) -> _Picks | None:
         if (
@@ -71,6 +76,7 @@ class CandidateCache:
 
     def _store(self, key: tuple[object, ...], centers: F64, activation: float, picks: _Picks) -> None:
         self._key, self._centers, self._activation, self._picks = key, centers.copy(), activation, picks
+        self._dist = [None] * len(picks.scene)
 
 
 def _same(a: object, b: object) -> bool:
@@ -105,6 +111,7 @@ def find_candidates(
         allowance = base + extra_margin
         need += float(extra_margin.max(initial=0.0))
     picks: _Picks | None = None
+    hit = False  # the picks come from the cache (their exact distances there bound the ones now)
     if bounds is not None and links is not None and np.isfinite(activation):
         spare = 0.0 if cache is None else cache.slack
         key: tuple[object, ...] = (pairs, *(x for layer in layers for x in layer), *map(float, margins))
@@ -126,10 +133,19 @@ def find_candidates(
                 cache.misses += 1
         elif cache is not None:
             cache.hits += 1
+            hit = True
     first, second, slacks, directions = [], [], [], []
     for i, (layer, mask) in enumerate(layers):
         check = np.flatnonzero(mask) if picks is None else picks.scene[i]
+        known = cache._dist[i] if hit and cache is not None else None
+        if known is not None and cache is not None:  # 1-Lipschitz: at least the distance then - the way since
+            moved = centers[check] - cache._centers[check]
+            bound = known - np.sqrt(np.add.reduce(moved * moved, axis=1)) - allowance[check]
+            cache.skipped += int(np.count_nonzero(bound >= activation))
+            check = check[bound < activation]
         dist, normal = layer.query(centers[check], grounded[check])
+        if cache is not None and picks is not None and not hit:
+            cache._dist[i] = dist
         slack = dist - allowance[check]
         near = np.flatnonzero(slack < activation)
         first.append(check[near])
