@@ -387,15 +387,10 @@ def _point_rows(
     if not used.any():
         return rows
     frame = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
-    fids = spheres.frame_ids[idx[used]].tolist()
-    jac, origin = np.empty((len(fids), 6, model.nv)), np.empty((len(fids), 3))
-    seen: dict[int, int] = {}  # frame -> its first row (each frame's Jacobian is read once)
-    for k, f in enumerate(fids):
-        if f in seen:
-            jac[k], origin[k] = jac[seen[f]], origin[seen[f]]
-        else:
-            seen[f] = k
-            jac[k], origin[k] = pin.getFrameJacobian(model, data, f, frame), data.oMf[f].translation
+    seen: dict[int, int] = {}  # frame -> its index among the frames read (each Jacobian is read once)
+    inverse = [seen.setdefault(f, len(seen)) for f in spheres.frame_ids[idx[used]].tolist()]
+    jac = np.array([pin.getFrameJacobian(model, data, f, frame) for f in seen])[inverse]
+    origin = np.array([data.oMf[f].translation for f in seen])[inverse]
     d = dirs[used]
     r = centers[idx[used]] - origin
     lever = np.column_stack(  # d x r (np.cross's formula, without its overhead): d . (w x r) = -(d x r) . w
