@@ -14,7 +14,9 @@ object) is not taken: the executed plan goes on. Pushes are not re-planned (the 
 The wrapper goes away when ``run_task`` takes a perturbation config.
 
 IK time: ``trajectory.meta`` of the retargeting (``ik_time_s`` over ``frames``: per-frame differential IK,
-joint smoothing and residuals of the initial plan; re-plans are reported separately).
+the arm-branch search and second tracking pass where a grasp was missed, joint smoothing and residuals of
+the initial plan; re-plans are reported separately). ``ik_search_s``: the arm-branch part of it (static
+solves from seeded arm configurations and the second tracking pass).
 """
 
 from __future__ import annotations
@@ -240,6 +242,8 @@ def run_episode(
         outcome = run_task(demo_task(case), case.spec, cloud, planner, cfg)
     rep = outcome.report
     ms, fps, frames = _ik(outcome)
+    meta = outcome.trajectory.meta if outcome.trajectory is not None else {}
+    search = float((meta.get("arm_branches") or {}).get("time_s", 0.0))  # [s] of the IK time
     recovered = [p.recovered for p in rep.perturbations if p.event.get("kind") == "push"]
     row.update(
         success=bool(rep.success),
@@ -255,6 +259,7 @@ def run_episode(
         ik_ms_per_frame=ms,
         ik_fps=fps,
         ik_frames=frames,
+        ik_search_s=search,
         timings_s={k: round(v, 3) for k, v in outcome.timings.items()},
         realtime_factor=rep.realtime_factor,
     )

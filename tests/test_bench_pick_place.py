@@ -79,6 +79,7 @@ def test_quick_run_writes_the_tables(repo_root: Path, tmp_path: Path) -> None:
     assert (tmp_path / "pick_place.png").stat().st_size > 1000
     md = (tmp_path / "pick_place.md").read_text()
     assert "dual_ur5e/implicit/plain" in md and "dual_ur5e/implicit/perturbed" in md and "IK [ms/frame]" in md
+    assert "IK w/o arm search [frames/s]" in md
     assert results["episodes"] == len(results["rows"]) == 2 and results["cases"] == 1
     rows = {r["perturbed"]: r for r in results["rows"]}
     assert set(rows) == {False, True}
@@ -90,6 +91,8 @@ def test_quick_run_writes_the_tables(repo_root: Path, tmp_path: Path) -> None:
         if row["stage"] == "done":
             assert row["ik_frames"] > 0 and 0.0 < row["ik_ms_per_frame"] < 1000.0
             assert math.isclose(row["ik_fps"], 1000.0 / row["ik_ms_per_frame"], rel_tol=1e-6)
+            ik_s = row["ik_frames"] / row["ik_fps"]
+            assert 0.0 <= row["ik_search_s"] < ik_s  # the arm-branch search is part of the IK time
             assert row["duration_s"] > 0.0 and row["collisions"] >= 0
     pert = rows[True]["perturbation"]
     assert pert["events"] and all(e["kind"] in ("push", "target_move") for e in pert["events"])
@@ -101,6 +104,8 @@ def test_quick_run_writes_the_tables(repo_root: Path, tmp_path: Path) -> None:
             assert value is None or 0.0 <= value <= 1.0 or math.isnan(value)
         assert 0.0 <= stats["success_rate"] <= 1.0
         assert stats["wall_per_episode_s"] > 0.0
+        if stats["ik_fps"] is not None:  # without the arm search: at least as fast
+            assert stats["ik_fps_without_search"] >= stats["ik_fps"] and 0.0 <= stats["ik_search_share"] < 1.0
     assert set(summary["cells"]) == {"dual_ur5e/implicit/plain", "dual_ur5e/implicit/perturbed"}
     target = summary["targets"]["dual_ur5e_success"]
     assert target["target"] == 0.9 and isinstance(target["met"], bool)
