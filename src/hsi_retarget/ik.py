@@ -67,10 +67,11 @@ class IKConfig:
     #: pass furniture edges with room for the execution's tracking error, and close in only at a grasp
     tip_margin_far: float = 0.015
     self_margin: float = 0.015  #: [m] clearance kept between the arms and between an arm and the body
-    #: [m] beyond the margin: farther pairs get no constraint row (a row binds only when one step would close
-    #: ``collision_gain`` of the gap, 5 cm at 0.1 m; 0.15 m measured the same trajectories to 2e-7 rad on 6
-    #: benchmark cases, 6 % slower)
-    activation_distance: float = 0.10
+    #: [m] beyond the margin: farther pairs get no constraint row. A row binds only when one step would
+    #: close ``collision_gain`` of the gap, but a first frame's solve takes large steps: at 0.10 m (6 %
+    #: faster, the same trajectories to 2e-7 rad on 6 benchmark cases) a perturbed episode's re-plan
+    #: missed its grasp.
+    activation_distance: float = 0.15
     collision_gain: float = 0.5  #: [-] fraction of the gap to the margin one step may close
     max_collision_rows: int = 24  #: [-] closest pairs constrained per step
     self_collision: bool = True  #: [-] constrain left/right arm and arm/body spheres
