@@ -159,11 +159,11 @@ def test_a_link_is_kept_by_the_largest_margin_of_its_spheres(name: str) -> None:
             centers[None],
             links[None],
             np.zeros((0, 2), np.int64),
-            layers,
+            wall,  # type: ignore[arg-type]
             margins=margins,
             reach=reach,
             bounds=bounds,
-        )  # type: ignore[arg-type]
+        )
         assert along[0] == pytest.approx(float(full[2].min()), abs=1e-12)  # the path check: the same rule
         checked += 1
     assert checked >= 4

@@ -30,7 +30,7 @@ F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
 #: [m] the pre-filter of sphere pairs keeps this much more than the activation (its distances round
 #: differently from the exact ones computed after it)
-_FILTER_TOLERANCE = 1e-9
+FILTER_TOLERANCE = 1e-9
 
 
 @dataclass(frozen=True)
@@ -158,7 +158,7 @@ def find_candidates(
             a, b = a[picks.pairs], b[picks.pairs]
         elif np.isfinite(activation):  # every centre distance at once (C), then the pairs that may be near
             gap = cdist(centers, centers)[a, b] - spheres.radii[a] - spheres.radii[b] - self_margin
-            maybe = gap < activation + _FILTER_TOLERANCE
+            maybe = gap < activation + FILTER_TOLERANCE
             a, b = a[maybe], b[maybe]
         delta = centers[a] - centers[b]
         norm = np.sqrt(np.add.reduce(delta * delta, axis=1))  # np.linalg.norm(axis=1) without its wrapper
@@ -202,5 +202,5 @@ def _cull(
         scene.append(check[bound - allowance[check] < reach])
     culled = None
     if pairs.shape[0] and bounds.pairs is pairs:
-        culled = bounds.near_pairs(centers, reach + self_margin + _FILTER_TOLERANCE)
+        culled = bounds.near_pairs(centers, reach + self_margin + FILTER_TOLERANCE)
     return _Picks(tuple(scene), culled)

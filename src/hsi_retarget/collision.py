@@ -317,7 +317,7 @@ def collision_rows(
         spheres,
         centers,
         pairs,
-        _layers(spheres, scene, extra),
+        scene_layers(spheres, scene, extra),
         spheres.grounded,  # the base stands on the floor: body spheres ignore it
         margins=margins,
         activation=activation,
@@ -361,7 +361,7 @@ def min_gap(
         spheres,
         centers,
         pairs,
-        _layers(spheres, scene, extra),
+        scene_layers(spheres, scene, extra),
         spheres.grounded,
         margins=margins,
         activation=activation,
@@ -372,7 +372,9 @@ def min_gap(
     return float(gaps.min(initial=math.inf))
 
 
-def _layers(spheres: SphereSet, scene: SceneDistance | None, extra: SceneLayer | None) -> list[SceneLayer]:
+def scene_layers(
+    spheres: SphereSet, scene: SceneDistance | None, extra: SceneLayer | None
+) -> list[SceneLayer]:
     """The scene (every sphere heeds it) and the ``extra`` layer, those present."""
     layers: list[SceneLayer] = [] if scene is None else [(scene, spheres.everyone)]
     return layers + ([] if extra is None else [extra])

@@ -333,13 +333,14 @@ class IKSolver:
         """Rows A (k, nv) and lower bounds (k,) of the closest sphere pairs; smallest clearance - margin
         (``extra`` (S,) [m]: more scene margin per sphere)."""
         cfg = self.config
+        pairs, margins = self._checked()
         return collision_rows(
             self._model,
             self._data,
             self.spheres,
-            self._pairs if cfg.self_collision else np.zeros((0, 2), dtype=np.int64),
+            pairs,
             self.scene,
-            margins=(cfg.scene_margin, cfg.tip_margin, cfg.self_margin),
+            margins=margins,
             activation=cfg.activation_distance,
             gain=cfg.collision_gain,
             max_rows=cfg.max_collision_rows,
@@ -419,6 +420,13 @@ class IKSolver:
             rows, lo, hi = rows[:0], lo[:0], hi[:0]
         return solve_qp(hess, grad, rows, row_bounds=(lo, hi), box=(lbx, ubx))
 
+    def _checked(self) -> tuple[NDArray[np.int64], tuple[float, float, float]]:
+        """The sphere pairs checked for self-collision (none without :attr:`IKConfig.self_collision`) and
+        the (scene, finger tip, self) margins [m]."""
+        cfg = self.config
+        pairs = self._pairs if cfg.self_collision else np.zeros((0, 2), dtype=np.int64)
+        return pairs, (cfg.scene_margin, cfg.tip_margin, cfg.self_margin)
+
     def _world(self, q: F64, *, posed: bool = False) -> tuple[F64, F64]:
         """(F, 3) link bounding centres and (S, 3) sphere centres [m] at ``q`` (nq,), read-only, from the
         last few configurations asked for (an IK step, its clearance checks and the next step share one
@@ -446,8 +454,7 @@ class IKSolver:
         ``within`` measures fewer pairs: cheaper when only a cut into the margins matters)."""
         cfg = self.config
         reach = cfg.activation_distance if within is None else float(within)
-        pairs = self._pairs if cfg.self_collision else np.zeros((0, 2), dtype=np.int64)
-        margins = (cfg.scene_margin, cfg.tip_margin, cfg.self_margin)
+        pairs, margins = self._checked()
         links, centers = self._world(q)
         gap = min_gap(
             self.spheres,
@@ -474,12 +481,17 @@ class IKSolver:
         for i, q in enumerate(qs):
             pin.framesForwardKinematics(self._model, self._data, q)
             links[i], centers[i] = self._bounds.world(self._data, self.spheres)
-        pairs = self._pairs if cfg.self_collision else np.zeros((0, 2), dtype=np.int64)
-        layers = [] if self.scene is None else [(self.scene, self.spheres.everyone)]
-        layers += [] if self._layer is None else [self._layer]
-        margins = (cfg.scene_margin, cfg.tip_margin, cfg.self_margin)
+        pairs, margins = self._checked()
         return path_gaps(
-            self.spheres, centers, links, pairs, layers, margins=margins, reach=reach, bounds=self._bounds
+            self.spheres,
+            centers,
+            links,
+            pairs,
+            self.scene,
+            margins=margins,
+            reach=reach,
+            bounds=self._bounds,
+            extra=self._layer,
         )
 
     def clearance_bound(self, q_from: F64, q_to: F64, clearance_from: float) -> float:

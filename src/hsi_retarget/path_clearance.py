@@ -21,15 +21,16 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hsi_planning.errors import RetargetError
+from hsi_retarget.candidates import FILTER_TOLERANCE
+from hsi_retarget.collision import SceneLayer, scene_layers
 
 if TYPE_CHECKING:
-    from hsi_retarget.collision import SceneLayer, SphereSet
+    from hsi_retarget.collision import SphereSet
     from hsi_retarget.culling import LinkBounds
+    from hsi_retarget.scene_distance import SceneDistance
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
-#: [m] the pairs' pre-filter keeps this much more than ``reach`` (its distances round differently)
-_FILTER_TOLERANCE = 1e-9
 
 
 def path_gaps(
@@ -37,15 +38,17 @@ def path_gaps(
     centers: F64,
     links: F64,
     pairs: I64,
-    layers: list[SceneLayer],
+    scene: SceneDistance | None,
     *,
     margins: tuple[float, float, float],
     reach: float,
     bounds: LinkBounds,
+    extra: SceneLayer | None = None,
 ) -> F64:
     """(N,) [m] per configuration, the smallest sphere clearance minus its margin (``margins`` = scene,
-    finger tip, self [m]) against each of ``layers`` and over ``pairs`` (P, 2), or ``inf`` where nothing is
-    closer than ``reach`` [m] beyond its margin. ``centers`` (N, S, 3) [m]: world sphere centres of each
+    finger tip, self [m]) against ``scene`` and the ``extra`` layer (as
+    :func:`~hsi_retarget.collision.min_gap`) and over ``pairs`` (P, 2), or ``inf`` where nothing is closer
+    than ``reach`` [m] beyond its margin. ``centers`` (N, S, 3) [m]: world sphere centres of each
     configuration, ``links`` (N, F, 3) [m]: the link bounding centres of ``bounds`` there
     (:meth:`~hsi_retarget.culling.LinkBounds.world`).
 
@@ -64,14 +67,14 @@ def path_gaps(
     out = np.full(n, np.inf)
     allowance = spheres.radii + np.where(spheres.tips, tip_margin, scene_margin)
     link_reach = reach + max(tip_margin, scene_margin)
-    for scene, mask in layers:
-        link_bound = scene.lower_bound(links.reshape(-1, 3)).reshape(links.shape[:2]) - bounds.radii[None, :]
+    for layer, mask in scene_layers(spheres, scene, extra):
+        link_bound = layer.lower_bound(links.reshape(-1, 3)).reshape(links.shape[:2]) - bounds.radii[None, :]
         frame, sphere = np.nonzero((link_bound < link_reach)[:, bounds.owner] & mask[None, :])
         pts = centers[frame, sphere]
         grounded = spheres.grounded[sphere]
-        maybe = scene.lower_bound(pts, grounded) - allowance[sphere] < reach
+        maybe = layer.lower_bound(pts, grounded) - allowance[sphere] < reach
         frame, sphere, pts, grounded = frame[maybe], sphere[maybe], pts[maybe], grounded[maybe]
-        slack = scene.query(pts, grounded)[0] - allowance[sphere]
+        slack = layer.query(pts, grounded)[0] - allowance[sphere]
         near = slack < reach
         np.minimum.at(out, frame[near], slack[near])
     if pairs.shape[0]:
@@ -79,7 +82,7 @@ def path_gaps(
         for i in range(n):
             c = centers[i]
             if culled:
-                a, b = pairs[bounds.near_pairs(c, reach + self_margin + _FILTER_TOLERANCE)].T
+                a, b = pairs[bounds.near_pairs(c, reach + self_margin + FILTER_TOLERANCE)].T
             else:
                 a, b = pairs[:, 0], pairs[:, 1]
             if a.shape[0] == 0:
