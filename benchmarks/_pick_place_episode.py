@@ -252,6 +252,7 @@ def run_episode(
         failures=list(rep.failures),
         diagnosis=outcome.diagnosis(),
         placement_error_m=rep.placement_error_m,
+        place_shift_m=rep.place_shift_m,
         duration_s=rep.duration_s,
         collisions=rep.collisions,
         max_tracking_error_m=rep.max_tracking_error_m,

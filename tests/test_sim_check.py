@@ -29,6 +29,7 @@ from hsi_retarget.sim_check import (
     ExecutionReport,
     PerturbationConfig,
     PerturbationEvent,
+    PlaceFeedbackConfig,
     Push,
     SimWorld,
     TargetMove,
@@ -478,9 +479,32 @@ def test_moved_target_triggers_replanning_and_the_pick_still_succeeds(world: Sim
     assert report.duration_s > 0.5 + traj.duration  # the new plan started at the move
     assert report.success and report.placement_error_m is not None and report.placement_error_m < 0.005
     world.reset()
-    blind = execute(world, traj, goal=TaskGoal("can1", PLACE), perturbations=[move])
+    open_loop = ExecutionConfig(place_feedback=PlaceFeedbackConfig(enabled=False))
+    blind = execute(world, traj, open_loop, goal=TaskGoal("can1", PLACE), perturbations=[move])
     assert not blind.success and blind.replans == 0 and not blind.perturbations[0].replanned
     assert blind.placement_error_m is not None and blind.placement_error_m > 0.02
+    assert blind.place_shift_m == 0.0
+
+
+def test_the_carry_is_corrected_from_where_the_object_sits_in_the_hand(world: SimWorld) -> None:
+    # the can moved 4 cm after planning and no re-plan: the hand closes 4 cm off its planned grasp, and the
+    # in-hand feedback shifts the carry so that the can still lands on its placement
+    traj = _pick_script(world, "can1", PLACE).build()
+    move = TargetMove(0.5, "can1", (0.04, 0.0, 0.0))
+    report = execute(world, traj, goal=TaskGoal("can1", PLACE), perturbations=[move])
+    assert report.success, report.failures
+    assert report.placement_error_m is not None and report.placement_error_m < 0.006
+    assert 0.03 < report.place_shift_m <= PlaceFeedbackConfig().max_shift_m + 1e-9
+    world.reset()  # more than the feedback may correct: it stops at its bound and says so
+    small = ExecutionConfig(place_feedback=PlaceFeedbackConfig(max_shift_m=0.01))
+    bounded = execute(world, traj, small, goal=TaskGoal("can1", PLACE), perturbations=[move])
+    assert bounded.place_shift_m == pytest.approx(0.01, abs=1e-6)
+    assert bounded.placement_error_m is not None and 0.02 < bounded.placement_error_m < 0.04
+    world.reset()  # without a perturbation the shift stays small (the plan puts the can where it should)
+    plain = execute(world, traj, goal=TaskGoal("can1", PLACE))
+    assert plain.success and plain.place_shift_m < 0.005
+    with pytest.raises(ConfigError, match=r"PlaceFeedbackConfig\.max_shift_m"):
+        PlaceFeedbackConfig(max_shift_m=-0.01)
 
 
 def test_humanoid_on_its_pelvis_anchor_stands_and_tracks_an_arm_motion() -> None:

@@ -29,6 +29,7 @@ from hsi_retarget.sim_check.perturb import (  # noqa: E402
     arm_links,
     random_perturbations,
 )
+from hsi_retarget.sim_check.place_feedback import PlaceFeedback, PlaceFeedbackConfig  # noqa: E402
 from hsi_retarget.sim_check.report import (  # noqa: E402
     ExecutionReport,
     ExecutionTrace,
@@ -53,6 +54,8 @@ __all__ = [
     "PerturbationConfig",
     "PerturbationEvent",
     "PerturbationRecord",
+    "PlaceFeedback",
+    "PlaceFeedbackConfig",
     "Push",
     "RePlanHook",
     "SimWorld",

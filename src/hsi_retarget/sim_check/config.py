@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 
 from hsi_planning.errors import ConfigError
 from hsi_retarget.sim_check.grasp import GraspConfig
+from hsi_retarget.sim_check.place_feedback import PlaceFeedbackConfig
 
 
 @dataclass(frozen=True)
@@ -45,6 +46,9 @@ class ExecutionConfig:
     recovery_window_s: float = 1.5  #: time after a perturbation to recover [s]
     fall_drop_m: float = 0.3  #: floating robots: pelvis drop that counts as a fall [m]
     grasp: GraspConfig = field(default_factory=GraspConfig)  #: grasp detection
+    #: the carry of the task's object corrected from its pose in the hand
+    #: (:mod:`hsi_retarget.sim_check.place_feedback`)
+    place_feedback: PlaceFeedbackConfig = field(default_factory=PlaceFeedbackConfig)
 
     def __post_init__(self) -> None:
         positive = ("control_rate_hz", "placement_tolerance_m", "door_open_rad", "drawer_open_m")

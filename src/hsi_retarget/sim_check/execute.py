@@ -27,6 +27,7 @@ from hsi_retarget.sim_check.judge import RunLog, judge
 from hsi_retarget.sim_check.mjcf import HANDS
 from hsi_retarget.sim_check.monitor import ContactMonitor, LimitMonitor
 from hsi_retarget.sim_check.perturb import PerturbationEvent, Push, RePlanHook, TargetMove
+from hsi_retarget.sim_check.place_feedback import PlaceFeedback
 from hsi_retarget.sim_check.report import ExecutionReport, ExecutionTrace
 from hsi_retarget.sim_check.world import SimWorld
 
@@ -73,7 +74,12 @@ class _Run:
     """State of one execution (trajectory in force, events, logs)."""
 
     def __init__(
-        self, world: SimWorld, trajectory: JointTrajectory, cfg: ExecutionConfig, hook: RePlanHook | None
+        self,
+        world: SimWorld,
+        trajectory: JointTrajectory,
+        cfg: ExecutionConfig,
+        hook: RePlanHook | None,
+        goal: TaskGoal,
     ) -> None:
         self.world, self.cfg, self.hook = world, cfg, hook
         m = world.model
@@ -83,6 +89,7 @@ class _Run:
         self.contacts = ContactMonitor(world, cfg.collision_depth_m)
         self.limits = LimitMonitor(world, cfg.limit_tolerance)
         self.servo = _Servo(world, cfg.feedforward)
+        self.feedback = PlaceFeedback(world, goal.object_name, goal.placement, cfg.place_feedback)
         self.pushes: list[tuple[Push, int]] = []
         self.replanned: list[bool] = []
         self.log: tuple[list[float], list[list[float]], list[float]] = ([], [], [])
@@ -94,6 +101,7 @@ class _Run:
         check_trajectory(self.world, trajectory)
         self.active, self.t_active, self.events = trajectory, t, list(trajectory.events)
         self.grasp.expect(trajectory.events, t)
+        self.feedback.switch(trajectory)
         vel = trajectory.velocities()
         robot = self.world.robot
         for name, iq in zip(self.limits.names, self.limits.q_idx.tolist(), strict=True):
@@ -133,7 +141,7 @@ class _Run:
         w, tau = self.world, t - self.t_active
         while self.events and self.events[0].time <= tau + 1e-9:
             self.grasp.command(self.events.pop(0), t)
-        q_ref = self.active.sample(tau)
+        q_ref = self.feedback.command(self.active.sample(tau), tau, t, self.grasp.held, self.dt)
         qd_ref = (self.active.sample(tau + self.dt / 2) - self.active.sample(tau - self.dt / 2)) / self.dt
         reference = {h: float(np.mean(q_ref[w.finger_q[h]])) for h in HANDS}
         self.servo.apply(q_ref, qd_ref, self.grasp.finger_targets(self.dt, reference))
@@ -195,7 +203,8 @@ def execute(
     check_trajectory(world, trajectory)
     if cfg.snap_to_start:
         world.set_robot_q(trajectory.q[0])
-    run = _Run(world, trajectory, cfg, on_perturbation)
+    goal = goal if goal is not None else TaskGoal()
+    run = _Run(world, trajectory, cfg, on_perturbation, goal)
     pending = sorted(perturbations, key=lambda e: e.time_s)
     start, wall0 = world.time, wallclock.perf_counter()
     t = 0.0
@@ -209,7 +218,7 @@ def execute(
         world.data.xfrc_applied[body, :3] = 0.0
     log = RunLog(
         world=world,
-        goal=goal if goal is not None else TaskGoal(),
+        goal=goal,
         config=cfg,
         trace=run.trace(),
         grasp=run.grasp,
@@ -218,6 +227,7 @@ def execute(
         events=tuple(sorted(perturbations, key=lambda e: e.time_s)),
         replanned=tuple(run.replanned),
         fell=run.fell,
+        place_shift_m=run.feedback.largest,
         duration_s=t,
         wall_s=wallclock.perf_counter() - wall0,
     )

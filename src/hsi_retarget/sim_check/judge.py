@@ -38,6 +38,7 @@ class RunLog:
     events: tuple[PerturbationEvent, ...]  #: perturbations, by time
     replanned: tuple[bool, ...]  #: per handled event: the hook returned a trajectory
     fell: bool
+    place_shift_m: float  #: largest carry correction of the task object [m]
     duration_s: float  #: simulated [s]
     wall_s: float  #: wall-clock [s]
 
@@ -117,6 +118,7 @@ def judge(log: RunLog) -> ExecutionReport:
         object_final_poses={n: world.object_pose(n).tolist() for n in world.objects},
         failures=tuple(failures),
         replans=sum(log.replanned),
+        place_shift_m=log.place_shift_m,
         wall_time_s=log.wall_s,
         realtime_factor=log.duration_s / log.wall_s if log.wall_s > 0 else 0.0,
         trace=trace,

@@ -72,6 +72,9 @@ class ExecutionReport:
     object_final_poses: dict[str, list[float]] = field(default_factory=dict)  #: name -> pos [m] + quat wxyz
     failures: tuple[str, ...] = ()  #: why ``success`` is False
     replans: int = 0  #: trajectories taken from the re-plan hook
+    #: largest correction of the task object's carry from its pose in the hand [m]
+    #: (:mod:`hsi_retarget.sim_check.place_feedback`)
+    place_shift_m: float = 0.0
     wall_time_s: float = 0.0  #: [s]
     realtime_factor: float = 0.0  #: simulated seconds per wall-clock second [-]
     trace: ExecutionTrace | None = None

@@ -1,0 +1,167 @@
+"""Closed-loop placement: the carry of the task's object corrected from where the object is in the hand.
+
+A plan puts the object down where it planned to grasp it. In MuJoCo the object can sit elsewhere in the
+hand: a drawer opened a centimetre less than the IK had it moves the mug in it, a target moved after
+planning, the humanoid's pelvis leaning under its reaching arm (its anchor weld is soft) closes the hand
+off its commanded pose. A robot that sees the object in its hand corrects the carry; this controller does
+so from the simulated object pose (a stand-in for tracking the held object with the cameras).
+
+While the task's object is welded to a hand, the desired object position at trajectory time ``tau`` is
+the placement carried rigidly with the *planned* TCP, ``p_des(tau) = T(tau) T(tau_r)^-1 placement``
+(``T``: the trajectory's TCP pose (4, 4) in the world, ``tau_r``: that hand's release of the object), and
+an integral controller moves the TCP by a world translation ``shift`` (3,) [m] against the error
+``p_object - p_des`` at ``gain`` [1/s]. The shift never pushes the object down (it may lift it: an object
+pressed onto the support would otherwise be pressed harder); it is bounded by ``max_shift_m``. The arm
+joints take it through the damped inverse of the TCP Jacobian with the orientation kept
+(``dq = J^T (J J^T + damping^2 I)^-1 [shift; 0]``, both hands of a two-handed carry). After the release
+the shift is held for ``hold_s`` (the fingers open around the object) and eased out over ``ease_s``.
+The corrected path is not collision-checked: a shift is centimetres, inside the IK's scene margins.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from hsi_planning.errors import ConfigError
+from hsi_retarget.easing import ease
+from hsi_retarget.joint_trajectory import JointTrajectory
+from hsi_retarget.sim_check.mjcf import HANDS
+from hsi_retarget.sim_check.world import SimWorld
+
+F64 = NDArray[np.float64]
+_LOG = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class PlaceFeedbackConfig:
+    """Gains and bounds of :class:`PlaceFeedback`."""
+
+    enabled: bool = True  #: correct the carry of the task's object from its simulated pose [-]
+    filter_s: float = 0.3  #: time constant of the low-pass on the shift estimate [s]
+    lead_s: float = 0.5  #: the shift is fully in this long before the release [s]
+    max_shift_m: float = 0.05  #: largest TCP shift [m]
+    damping: float = 0.02  #: damping of the Jacobian inverse [m]
+    hold_s: float = 0.8  #: the shift is held this long after the release [s]
+    ease_s: float = 0.8  #: then eased out over this time [s]
+
+    def __post_init__(self) -> None:
+        for name in ("filter_s", "lead_s", "max_shift_m", "damping", "hold_s", "ease_s"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ConfigError(f"PlaceFeedbackConfig.{name} must be finite and >= 0, got {value}")
+
+
+@dataclass
+class _Carry:
+    """The task object's release in the trajectory in force, per hand."""
+
+    release: dict[str, float] = field(default_factory=dict)  #: hand -> release time [s] (trajectory time)
+    at_release: dict[str, F64] = field(default_factory=dict)  #: hand -> (4, 4) world TCP pose there
+
+
+class PlaceFeedback:
+    """The integral placement correction of one execution (see the module docstring)."""
+
+    def __init__(
+        self,
+        world: SimWorld,
+        object_name: str,
+        placement: tuple[float, float, float] | None,
+        config: PlaceFeedbackConfig | None = None,
+    ) -> None:
+        """``object_name``: the task's free object ('' none); ``placement``: its goal position (3,) [m]
+        (None: no correction)."""
+        self.world, self.object_name = world, object_name
+        self.placement = None if placement is None else np.append(np.asarray(placement, dtype=float), 1.0)
+        self.config = config if config is not None else PlaceFeedbackConfig()
+        self.shift = np.zeros(3)  #: current TCP shift (3,) [m], world frame
+        self.largest = 0.0  #: largest shift applied so far [m]
+        self._carry = _Carry()
+        self._hands: tuple[str, ...] = ()  #: the hands the shift moves
+        self._released_at: float | None = None  #: execution time of the release [s]
+        self._grasped_at = 0.0  #: trajectory time of the grasp [s]
+        self._applied = np.zeros(3)  #: the shift applied at the last command [m]
+        robot = world.robot
+        self._arm_v = {h: robot.arm_v_indices(h) for h in HANDS}
+        self._arm_q = {h: robot.arm_q_indices(h) for h in HANDS}
+        self._active = (
+            self.config.enabled and bool(object_name) and self.placement is not None and robot.nq > 0
+        )
+
+    def switch(self, trajectory: JointTrajectory) -> None:
+        """Take the releases of the task object from ``trajectory`` (now in force)."""
+        self._carry = _Carry()
+        if not self._active:
+            return
+        name, robot = self.object_name, self.world.robot
+        for e in trajectory.events:
+            if e.kind == "release" and e.object_name == name and e.hand not in self._carry.release:
+                pose = robot.frame_pose(trajectory.sample(e.time), robot.tcp_frames[e.hand])
+                self._carry.release[e.hand] = float(e.time)
+                self._carry.at_release[e.hand] = self.world.base @ pose
+
+    def command(self, q_ref: F64, tau: float, t: float, held: dict[str, str], dt: float) -> F64:
+        """``q_ref`` (nq,) at trajectory time ``tau`` [s] (execution time ``t`` [s]) with the shift applied
+        to the carrying arm(s); ``held``: hand -> welded body now; ``dt``: control period [s]."""
+        if not self._active:
+            return q_ref
+        cfg, name = self.config, self.object_name
+        carrying = tuple(h for h in HANDS if held.get(h) == name and h in self._carry.release)
+        weight = 1.0
+        if carrying:
+            if not self._hands:  # the grasp: the shift eases in from here to the release
+                self._grasped_at = tau
+            self._hands, self._released_at = carrying, None
+            hand = carrying[0]
+            self._estimate(q_ref, tau, hand, dt)
+            span = self._carry.release[hand] - cfg.lead_s - self._grasped_at
+            weight = float(ease(np.array([(tau - self._grasped_at) / max(span, 1e-9)]))[0])
+        elif self._hands and self._released_at is None:
+            self._released_at = t
+        if self._released_at is not None:
+            late = (t - self._released_at - cfg.hold_s) / max(cfg.ease_s, 1e-9)
+            weight = 1.0 - float(ease(np.array([late]))[0])
+            if weight <= 0.0:
+                self.shift[:] = 0.0
+                self._applied[:] = 0.0
+                self._hands, self._released_at = (), None
+        if not self._hands or not np.any(self.shift):
+            return q_ref
+        self._applied = weight * self.shift
+        return self._apply(q_ref, self._applied)
+
+    def _estimate(self, q_ref: F64, tau: float, hand: str, dt: float) -> None:
+        """Update the shift that puts the object on its placement at the release, from where it sits in the
+        hand now relative to the commanded (shifted) TCP."""
+        robot, w, cfg = self.world.robot, self.world, self.config
+        if self.placement is None:  # not active
+            return
+        now = w.base @ robot.frame_pose(q_ref, robot.tcp_frames[hand])
+        now[:3, 3] += self._applied
+        in_hand = np.linalg.solve(now, np.append(w.object_pose(self.object_name)[:3], 1.0))
+        landing = (self._carry.at_release[hand] @ in_hand)[:3]
+        wanted = self.placement[:3] - landing
+        wanted[2] = max(wanted[2], 0.0)  # lift an object that sits low; never press one down
+        norm = float(np.linalg.norm(wanted))
+        if norm > cfg.max_shift_m:
+            wanted *= cfg.max_shift_m / norm
+        gain = 1.0 if not np.any(self.shift) else min(1.0, dt / max(cfg.filter_s, 1e-9))  # first: at once
+        self.shift = self.shift + gain * (wanted - self.shift)
+        self.largest = max(self.largest, float(np.linalg.norm(self.shift)))
+        _LOG.debug("tau %.2f landing error %s shift %s", tau, np.round(-wanted, 4), np.round(self.shift, 4))
+
+    def _apply(self, q_ref: F64, shift: F64) -> F64:
+        robot, cfg = self.world.robot, self.config
+        twist = np.concatenate([self.world.base[:3, :3].T @ shift, np.zeros(3)])  # robot frame
+        q = q_ref.copy()
+        for hand in self._hands:
+            jac = robot.jacobian(q_ref, robot.tcp_frames[hand])[:, self._arm_v[hand]]
+            dq = jac.T @ np.linalg.solve(jac @ jac.T + cfg.damping**2 * np.eye(6), twist)
+            iq = self._arm_q[hand]
+            q[iq] = np.clip(q[iq] + dq, robot.q_lower[iq], robot.q_upper[iq])
+        return q
