@@ -6,16 +6,23 @@ planning, the humanoid's pelvis leaning under its reaching arm (its anchor weld 
 off its commanded pose. A robot that sees the object in its hand corrects the carry; this controller does
 so from the simulated object pose (a stand-in for tracking the held object with the cameras).
 
-While the task's object is welded to a hand, the desired object position at trajectory time ``tau`` is
-the placement carried rigidly with the *planned* TCP, ``p_des(tau) = T(tau) T(tau_r)^-1 placement``
-(``T``: the trajectory's TCP pose (4, 4) in the world, ``tau_r``: that hand's release of the object), and
-an integral controller moves the TCP by a world translation ``shift`` (3,) [m] against the error
-``p_object - p_des`` at ``gain`` [1/s]. The shift never pushes the object down (it may lift it: an object
-pressed onto the support would otherwise be pressed harder); it is bounded by ``max_shift_m``. The arm
-joints take it through the damped inverse of the TCP Jacobian with the orientation kept
-(``dq = J^T (J J^T + damping^2 I)^-1 [shift; 0]``, both hands of a two-handed carry). After the release
-the shift is held for ``hold_s`` (the fingers open around the object) and eased out over ``ease_s``.
-The corrected path is not collision-checked: a shift is centimetres, inside the IK's scene margins.
+While the task's object is welded to a hand, every control step measures where it sits in the hand,
+``H = T_m^-1 p_object`` (``T_m``: the measured TCP pose (4, 4) in the world; in the hand frame, so the
+hand may turn during the carry; relative to the measured TCP, not the commanded one, so that an arm
+lagging its command while it moves fast is not read as a grasp offset), predicts where the object lands,
+``T(tau_r) H`` (``T``: the trajectory's TCP pose in the world, ``tau_r``: that hand's release of the
+object), and aims the world translation ``shift`` (3,) [m] of the TCP at the placement minus that landing,
+low-passed over ``filter_s`` (the first estimate, at the grasp, is taken at once). The estimate stands
+still while the object touches anything but the robot (set down early, pushed against the scene: its pose
+in the hand then says nothing about the grasp) and from ``lead_s`` before the release. The shift eases in
+from the grasp to ``lead_s`` before the release (a long carry is not bent far from its plan while it
+passes the scene). It never pushes the object down (it may lift it) and is bounded by ``max_shift_m`` (the
+report records the largest shift). The arm joints take it through the damped inverse of the TCP Jacobian
+with the orientation kept (``dq = J^T (J J^T + damping^2 I)^-1 [shift; 0]``; both hands of a two-handed
+carry), clipped to the joint limits. After the release the shift is held for ``hold_s`` (the fingers open
+around the object) and eased out over ``ease_s``. The corrected path is not collision-checked: a shift is
+centimetres, and the IK kept margins to the scene. What the TCP lags its command at the release (the
+humanoid's pelvis leaning) is not corrected.
 """
 
 from __future__ import annotations
@@ -31,7 +38,7 @@ from hsi_planning.errors import ConfigError
 from hsi_retarget.easing import ease
 from hsi_retarget.joint_trajectory import JointTrajectory
 from hsi_retarget.sim_check.mjcf import HANDS
-from hsi_retarget.sim_check.world import SimWorld
+from hsi_retarget.sim_check.world import KIND_ROBOT, SimWorld
 
 F64 = NDArray[np.float64]
 _LOG = logging.getLogger(__name__)
@@ -65,7 +72,7 @@ class _Carry:
 
 
 class PlaceFeedback:
-    """The integral placement correction of one execution (see the module docstring)."""
+    """The in-hand placement correction of one execution (see the module docstring)."""
 
     def __init__(
         self,
@@ -80,13 +87,14 @@ class PlaceFeedback:
         self.placement = None if placement is None else np.append(np.asarray(placement, dtype=float), 1.0)
         self.config = config if config is not None else PlaceFeedbackConfig()
         self.shift = np.zeros(3)  #: current TCP shift (3,) [m], world frame
-        self.largest = 0.0  #: largest shift applied so far [m]
+        self.largest = 0.0  #: largest shift aimed at so far [m]
         self._carry = _Carry()
         self._hands: tuple[str, ...] = ()  #: the hands the shift moves
         self._released_at: float | None = None  #: execution time of the release [s]
         self._grasped_at = 0.0  #: trajectory time of the grasp [s]
         self._applied = np.zeros(3)  #: the shift applied at the last command [m]
         robot = world.robot
+        self._own = np.flatnonzero(world.geom_owner == object_name) if object_name else np.zeros(0, int)
         self._arm_v = {h: robot.arm_v_indices(h) for h in HANDS}
         self._arm_q = {h: robot.arm_q_indices(h) for h in HANDS}
         self._active = (
@@ -118,7 +126,8 @@ class PlaceFeedback:
                 self._grasped_at = tau
             self._hands, self._released_at = carrying, None
             hand = carrying[0]
-            self._estimate(q_ref, tau, hand, dt)
+            if tau < self._carry.release[hand] - cfg.lead_s and not self._touching():
+                self._estimate(tau, hand, dt)
             span = self._carry.release[hand] - cfg.lead_s - self._grasped_at
             weight = float(ease(np.array([(tau - self._grasped_at) / max(span, 1e-9)]))[0])
         elif self._hands and self._released_at is None:
@@ -135,14 +144,27 @@ class PlaceFeedback:
         self._applied = weight * self.shift
         return self._apply(q_ref, self._applied)
 
-    def _estimate(self, q_ref: F64, tau: float, hand: str, dt: float) -> None:
+    def _touching(self) -> bool:
+        """Whether the object touches anything but the robot (it is set down, or pressed against the
+        scene: where it sits relative to the hand then says nothing about the grasp)."""
+        d, kind = self.world.data, self.world.geom_kind
+        if d.ncon == 0 or self._own.size == 0:
+            return False
+        pairs = np.asarray(d.contact.geom[: d.ncon])
+        mine = np.isin(pairs, self._own)
+        other = np.where(mine[:, 0], pairs[:, 1], pairs[:, 0])
+        return bool(np.any(mine.any(axis=1) & ~mine.all(axis=1) & (kind[other] != KIND_ROBOT)))
+
+    def _estimate(self, tau: float, hand: str, dt: float) -> None:
         """Update the shift that puts the object on its placement at the release, from where it sits in the
-        hand now relative to the commanded (shifted) TCP."""
-        robot, w, cfg = self.world.robot, self.world, self.config
+        hand now (relative to the measured TCP)."""
+        w, cfg = self.world, self.config
         if self.placement is None:  # not active
             return
-        now = w.base @ robot.frame_pose(q_ref, robot.tcp_frames[hand])
-        now[:3, 3] += self._applied
+        site = w.tcp_site[hand]
+        now = np.eye(4)
+        now[:3, :3] = np.asarray(w.data.site_xmat[site]).reshape(3, 3)
+        now[:3, 3] = w.data.site_xpos[site]
         in_hand = np.linalg.solve(now, np.append(w.object_pose(self.object_name)[:3], 1.0))
         landing = (self._carry.at_release[hand] @ in_hand)[:3]
         wanted = self.placement[:3] - landing
