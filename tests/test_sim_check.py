@@ -29,6 +29,7 @@ from hsi_retarget.sim_check import (
     ExecutionReport,
     PerturbationConfig,
     PerturbationEvent,
+    PlaceFeedback,
     PlaceFeedbackConfig,
     Push,
     SimWorld,
@@ -505,6 +506,21 @@ def test_the_carry_is_corrected_from_where_the_object_sits_in_the_hand(world: Si
     assert plain.success and plain.place_shift_m < 0.005
     with pytest.raises(ConfigError, match=r"PlaceFeedbackConfig\.max_shift_m"):
         PlaceFeedbackConfig(max_shift_m=-0.01)
+
+
+def test_the_placement_feedback_sees_when_the_object_touches_the_scene(world: SimWorld) -> None:
+    # standing on the counter it touches the scene (its pose in the hand then says nothing about the
+    # grasp); lifted clear of everything it does not
+    feedback = PlaceFeedback(world, "can1", PLACE)
+    world.move_object("can1", np.array([0.0, 0.0, -0.002]))  # pressed 2 mm into the counter
+    mujoco.mj_forward(world.model, world.data)
+    assert feedback._touching()
+    world.move_object("can1", np.array([0.0, 0.0, 0.3]))
+    mujoco.mj_forward(world.model, world.data)
+    assert not feedback._touching()
+    idle = PlaceFeedback(world, "", None)  # no placement goal: the commands pass through unchanged
+    q = world.robot_q()
+    assert np.array_equal(idle.command(q, 0.0, 0.0, {"left": "can1"}, 0.01), q)
 
 
 def test_humanoid_on_its_pelvis_anchor_stands_and_tracks_an_arm_motion() -> None:
