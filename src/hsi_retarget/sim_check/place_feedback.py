@@ -92,7 +92,6 @@ class PlaceFeedback:
         self._hands: tuple[str, ...] = ()  #: the hands the shift moves
         self._released_at: float | None = None  #: execution time of the release [s]
         self._grasped_at = 0.0  #: trajectory time of the grasp [s]
-        self._applied = np.zeros(3)  #: the shift applied at the last command [m]
         robot = world.robot
         self._own = np.flatnonzero(world.geom_owner == object_name) if object_name else np.zeros(0, int)
         self._arm_v = {h: robot.arm_v_indices(h) for h in HANDS}
@@ -137,12 +136,10 @@ class PlaceFeedback:
             weight = 1.0 - float(ease(np.array([late]))[0])
             if weight <= 0.0:
                 self.shift[:] = 0.0
-                self._applied[:] = 0.0
                 self._hands, self._released_at = (), None
         if not self._hands or not np.any(self.shift):
             return q_ref
-        self._applied = weight * self.shift
-        return self._apply(q_ref, self._applied)
+        return self._apply(q_ref, weight * self.shift)
 
     def _touching(self) -> bool:
         """Whether the object touches anything but the robot (it is set down, or pressed against the
@@ -175,7 +172,8 @@ class PlaceFeedback:
         gain = 1.0 if not np.any(self.shift) else min(1.0, dt / max(cfg.filter_s, 1e-9))  # first: at once
         self.shift = self.shift + gain * (wanted - self.shift)
         self.largest = max(self.largest, float(np.linalg.norm(self.shift)))
-        _LOG.debug("tau %.2f landing error %s shift %s", tau, np.round(-wanted, 4), np.round(self.shift, 4))
+        if _LOG.isEnabledFor(logging.DEBUG):  # every control step of a carry: no formatting otherwise
+            _LOG.debug("tau %.2f landing error %s shift %s", tau, -wanted.round(4), self.shift.round(4))
 
     def _apply(self, q_ref: F64, shift: F64) -> F64:
         robot, cfg = self.world.robot, self.config
