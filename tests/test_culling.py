@@ -65,7 +65,7 @@ def test_culled_rows_and_clearance_equal_the_full_check(name: str, kitchen: Scen
     assert bounds.pairs is not None and bounds.pairs is not pairs and np.array_equal(bounds.pairs, pairs)
     data = robot.model.createData()
     rng = np.random.default_rng(11)
-    margins = (config.scene_margin, config.tip_margin, config.self_margin)
+    margins = solver.margins
     compared = 0
     for _ in range(40):
         q = np.array(robot.q_home)
@@ -133,7 +133,7 @@ def test_a_link_is_kept_by_the_largest_margin_of_its_spheres(name: str) -> None:
     spheres, bounds = solver.spheres, solver._bounds
     pin.framesForwardKinematics(robot.model, solver._data, np.array(robot.q_home))
     links, centers = bounds.world(solver._data, spheres)
-    margins = (config.scene_margin, config.tip_margin, config.self_margin)
+    margins = solver.margins
     reach, checked = 0.0, 0
     for f in range(links.shape[0]):
         own = np.flatnonzero(bounds.owner == f)
@@ -181,7 +181,7 @@ def test_tight_clearances_culled_alone_and_along_a_path_equal_the_full_check(
     solver = IKSolver(robot, config, kitchen)
     assert solver._cache is None
     spheres, pairs = solver.spheres, solver.spheres.pairs()
-    margins = (config.scene_margin, config.tip_margin, config.self_margin)
+    margins = solver.margins
     rng = np.random.default_rng(17)
     qs = np.tile(robot.q_home, (150, 1))
     for q in qs:
@@ -264,7 +264,7 @@ def test_body_box_corners_are_covered_and_the_floor_is_no_body_obstacle() -> Non
     data = robot.model.createData()
     pin.computeJointJacobians(robot.model, data, robot.q_home)
     pin.updateFramePlacements(robot.model, data)
-    margins = (config.scene_margin, config.tip_margin, config.self_margin)
+    margins = (config.scene_margin, config.tip_margin, config.self_margin)  # the dual arm (fixed base)
     kwargs = dict(margins=margins, activation=config.activation_distance, gain=0.5, max_rows=1000)
     rows, lower, _ = collision_rows(robot.model, data, spheres, spheres.pairs()[:0], scene, **kwargs)  # type: ignore[arg-type]
     base_x = robot.v_index("base_x_joint")
@@ -331,7 +331,7 @@ def test_the_opened_part_constrains_the_ik_steps_of_the_spheres_that_heed_it() -
     data = robot.model.createData()
     pin.computeJointJacobians(robot.model, data, q)
     pin.updateFramePlacements(robot.model, data)
-    margins = (config.scene_margin, config.tip_margin, config.self_margin)
+    margins = solver.margins
     kwargs = dict(margins=margins, activation=config.activation_distance, gain=0.5, max_rows=1000)
     none = np.zeros((0, 2), dtype=np.int64)
     heed_all = np.ones(solver.spheres.radii.shape[0], dtype=bool)

@@ -16,7 +16,7 @@ from hsi_planning.errors import ConfigError, RetargetError
 from hsi_planning.scheduler.body import wrist_quaternion
 from hsi_retarget.collision import robot_spheres
 from hsi_retarget.humanoid_ik import SupportConfig, com_inside, support_polygon
-from hsi_retarget.ik import IKConfig, IKSolver, IKTargets
+from hsi_retarget.ik import IKConfig, IKSolver, IKTargets, solve_cascade
 from hsi_retarget.mapping import MappingConfig
 from hsi_retarget.robots import RobotModel
 from hsi_retarget.scene_distance import SceneDistance
@@ -153,16 +153,20 @@ def test_collision_margin_to_a_wall_in_front_of_the_arm(robots: dict[str, RobotM
         IKConfig(tip_margin=0.01, tip_margin_far=0.005)
 
 
-def test_arms_keep_the_self_margin_when_their_goals_cross(robots: dict[str, RobotModel]) -> None:
-    robot = robots["dual_ur5e"]
-    config = IKConfig(self_margin=0.02)
+@pytest.mark.parametrize("name", ["dual_ur5e", "humanoid"])
+def test_arms_keep_the_self_margin_when_their_goals_cross(robots: dict[str, RobotModel], name: str) -> None:
+    robot = robots[name]
+    config = IKConfig(self_margin=0.02, self_margin_floating=0.04)
+    margin = config.self_margin_floating if robot.floating else config.self_margin
     solver = IKSolver(robot, config)
     left = robot.frame_pose(robot.q_home, "left_tcp")
     right = robot.frame_pose(robot.q_home, "right_tcp")
-    left[:3, 3], right[:3, 3] = [0.5, -0.05, 1.0], [0.5, 0.05, 1.0]  # each hand beyond the other
-    result = solver.solve(
-        robot.q_home, IKTargets(tcp={"left": left, "right": right}, root=np.eye(4)), iterations=150
-    )
+    height = 1.0 if name == "dual_ur5e" else 1.1
+    x = 0.5 if name == "dual_ur5e" else 0.35
+    left[:3, 3], right[:3, 3] = [x, -0.05, height], [x, 0.05, height]  # each hand beyond the other
+    root = _root(robot) if robot.floating else np.eye(4)
+    targets = IKTargets(tcp={"left": left, "right": right}, root=root, feet=_feet(robot))
+    result = solver.solve(robot.q_home, targets, iterations=150)
     centers = solver.sphere_centers(result.q)
     sph = solver.spheres
     a, b = sph.of("left"), sph.of("right")
@@ -171,7 +175,7 @@ def test_arms_keep_the_self_margin_when_their_goals_cross(robots: dict[str, Robo
         - sph.radii[a][:, None]
         - sph.radii[b][None]
     )
-    assert gaps.min() >= config.self_margin - 2e-3
+    assert gaps.min() >= margin - 2e-3
     assert result.position_error["left"] > 0.01  # the crossing goals cannot both be met
 
 
@@ -469,3 +473,20 @@ def test_a_humanoid_keeps_its_thighs_off_the_furniture(robots: dict[str, RobotMo
     for _ in range(30):
         q, _ = solver.step(q, dataclasses.replace(targets, root=pelvis), 1.0 / 60.0)
     assert solver.clearance(q) > -0.003
+
+
+def test_an_infeasible_foot_row_softens_before_the_collision_rows_go() -> None:
+    """A swing foot that cannot make its step inside the box (an equality row) must not take the collision
+    rows with it: the cascade softens the foot first and keeps "do not get closer"."""
+    hess, grad = np.eye(2), np.array([1.0, 0.0])  # the task pulls x down, towards the obstacle
+    rows = np.array([[1.0, 0.0], [0.0, 1.0]])  # x: clearance row (inequality), y: the foot (equality)
+    lo, hi = np.array([0.5, 1.0]), np.array([np.inf, 1.0])  # 0.5: the step starts inside the margin
+    box = (np.full(2, -0.1), np.full(2, 0.1))
+    dx, ok, level = solve_cascade(hess, grad, rows, (lo, hi), box)
+    assert ok and level == 2
+    assert dx[0] == pytest.approx(0.0, abs=1e-9)  # no closer, though the task pulls
+    assert dx[1] == pytest.approx(0.1, abs=1e-6)  # the foot goes as far as the box lets it
+    without_foot = solve_cascade(hess, grad, rows[:1], (lo[:1], hi[:1]), box)
+    assert without_foot[1] and without_foot[2] == 1 and without_foot[0][0] == pytest.approx(0.0, abs=1e-9)
+    feasible = solve_cascade(hess, grad, rows, (np.array([-0.05, 0.05]), np.array([np.inf, 0.05])), box)
+    assert feasible[2] == 0 and feasible[0] == pytest.approx([-0.05, 0.05], abs=1e-9)

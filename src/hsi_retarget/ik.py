@@ -10,8 +10,10 @@ One step solves, for the joint step ``dq`` (tangent space, the gripper fingers e
 with the tasks: both TCP poses (position weight >> orientation weight), the root goal (dual arm: planar
 base x, y, yaw; humanoid: pelvis pose) and the torso lift. Position limits are velocity bounds, so a step
 never leaves the limits. When the constrained QP is infeasible (e.g. a step starting inside a margin), it
-is retried with the inequality rows relaxed to "do not get closer", then with them dropped (counted in
-:attr:`StepInfo.fallback`).
+is retried with the inequality rows relaxed to "do not get closer", then also with the feet's equality
+rows turned into stiff tasks (a swing foot that would have to bring a thigh closer to a cabinet than it
+is, or the CoM back into its polygon, cannot make the step infeasible: standing still is feasible), and
+only then with every row dropped (counted in :attr:`StepInfo.fallback`).
 """
 
 from __future__ import annotations
@@ -37,6 +39,7 @@ from hsi_retarget.scene_distance import SceneDistance
 F64 = NDArray[np.float64]
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 _WORLD_MEMO = 4  #: [-] configurations whose sphere centres :meth:`IKSolver._world` keeps
+_STIFF = 1e4  #: [-] weight of the feet's equality rows turned into tasks (:func:`solve_cascade`)
 
 
 @dataclass(frozen=True)
@@ -67,6 +70,10 @@ class IKConfig:
     #: pass furniture edges with room for the execution's tracking error, and close in only at a grasp
     tip_margin_far: float = 0.015
     self_margin: float = 0.015  #: [m] clearance kept between the arms and between an arm and the body
+    #: [m] that clearance on a floating-base robot (the humanoid): its arms lag their command by 2-4 cm in
+    #: MuJoCo while the pelvis and waist lean under them, and at 1.5 cm a forearm and the other upper arm,
+    #: planned apart, met in the simulation (benchmark: 5 more of 24 episodes succeeded at 3.5 cm)
+    self_margin_floating: float = 0.035
     #: [m] beyond the margin: farther pairs get no constraint row. A row binds only when one step would
     #: close ``collision_gain`` of the gap, but a first frame's solve takes large steps: at 0.10 m (6 %
     #: faster, the same trajectories to 2e-7 rad on 6 benchmark cases) a perturbed episode's re-plan
@@ -103,6 +110,7 @@ class IKConfig:
             "tip_margin_far",
             "scene_margin",
             "self_margin",
+            "self_margin_floating",
             "candidate_slack",
         ):
             if not getattr(self, name) >= 0.0:
@@ -151,7 +159,8 @@ class IKTargets:
 
 @dataclass(frozen=True)
 class StepInfo:
-    """Outcome of one step: QP status, fallback level (0: full, 1: relaxed rows, 2: no rows), rows used."""
+    """Outcome of one step: QP status, fallback level (0: full, 1: relaxed rows, 2: relaxed rows and soft
+    feet, 3: no rows), rows used."""
 
     success: bool
     fallback: int
@@ -386,46 +395,29 @@ class IKSolver:
             row_lo = np.concatenate([row_lo, eq_b, in_lo])
             row_hi = np.concatenate([row_hi, eq_b, np.full(in_lo.shape, np.inf)])
         n_coll = int(min(rows.shape[0], cfg.max_collision_rows))
-        for level in range(3):
-            lo, hi = np.array(row_lo), np.array(row_hi)
-            if level == 1:  # inequality rows: do not get closer / not further outside
-                ineq = ~np.isfinite(hi)
-                lo[ineq] = np.minimum(lo[ineq], 0.0)
-            dq_act, ok = self._solve_qp(
-                hess[np.ix_(act, act)],
-                grad[act],
-                rows[:, act],
-                bounds=(lo, hi, lower[act], upper[act]),
-                level=level,
-            )
-            if ok:
-                break
+        dq_act, ok, level = solve_cascade(
+            hess[np.ix_(act, act)], grad[act], rows[:, act], (row_lo, row_hi), (lower[act], upper[act])
+        )
         dq = np.zeros(robot.nv)
         if ok:
             dq[act] = np.clip(dq_act, lower[act], upper[act])
         info = StepInfo(bool(ok), level, n_coll, float(min_slack))
         return robot.integrate(q, dq), info
 
-    @staticmethod
-    def _solve_qp(
-        hess: F64, grad: F64, rows: F64, *, bounds: tuple[F64, F64, F64, F64], level: int
-    ) -> tuple[F64, bool]:
-        """Solve with rows ``lo <= rows dx <= hi`` and box ``lbx <= dx <= ubx`` (``bounds``); at ``level``
-        2 without the rows, the equality rows (feet) kept as stiff tasks."""
-        lo, hi, lbx, ubx = bounds
-        if level == 2:
-            eq = np.isfinite(hi)
-            hess = hess + 1e4 * rows[eq].T @ rows[eq]
-            grad = grad - 1e4 * rows[eq].T @ hi[eq]
-            rows, lo, hi = rows[:0], lo[:0], hi[:0]
-        return solve_qp(hess, grad, rows, row_bounds=(lo, hi), box=(lbx, ubx))
-
     def _checked(self) -> tuple[NDArray[np.int64], tuple[float, float, float]]:
         """The sphere pairs checked for self-collision (none without :attr:`IKConfig.self_collision`) and
         the (scene, finger tip, self) margins [m]."""
         cfg = self.config
         pairs = self._pairs if cfg.self_collision else np.zeros((0, 2), dtype=np.int64)
-        return pairs, (cfg.scene_margin, cfg.tip_margin, cfg.self_margin)
+        return pairs, self.margins
+
+    @property
+    def margins(self) -> tuple[float, float, float]:
+        """The (scene, finger tip, self) margins [m] (self: :attr:`IKConfig.self_margin_floating` on a
+        floating-base robot)."""
+        cfg = self.config
+        self_margin = cfg.self_margin_floating if self.robot.floating else cfg.self_margin
+        return cfg.scene_margin, cfg.tip_margin, self_margin
 
     def _world(self, q: F64, *, posed: bool = False) -> tuple[F64, F64]:
         """(F, 3) link bounding centres and (S, 3) sphere centres [m] at ``q`` (nq,), read-only, from the
@@ -545,3 +537,35 @@ class IKSolver:
                     break
         pos, ori = self.errors(q, targets)
         return IKResult(q, pos, ori, it, done, fallbacks)
+
+
+def solve_cascade(
+    hess: F64, grad: F64, rows: F64, row_bounds: tuple[F64, F64], box: tuple[F64, F64]
+) -> tuple[F64, bool, int]:
+    """The IK step's QP ``min 1/2 dx^T hess dx + grad^T dx`` with rows ``lo <= rows dx <= hi`` (equality rows:
+    ``lo == hi``; inequality rows: ``hi = inf``) and ``box`` (lbx, ubx), retried while infeasible: level 1
+    with the inequality rows relaxed to ``lo <= 0`` ("do not get closer"), level 2 also with the equality rows
+    as stiff tasks (skipped without equality rows), level 3 without any row.
+
+    Returns:
+        (dx, solved, level).
+    """
+    row_lo, row_hi = row_bounds
+    eq = np.isfinite(row_hi)
+    dx, ok, level = np.zeros(grad.shape[0]), False, 0
+    for level in range(4):
+        if level == 2 and not eq.any():  # level 2 would repeat level 1
+            continue
+        lo, hi = np.array(row_lo, dtype=np.float64), np.array(row_hi, dtype=np.float64)
+        if level in (1, 2):
+            lo[~eq] = np.minimum(lo[~eq], 0.0)
+        h, g, a = hess, grad, rows
+        if level >= 2:
+            h = hess + _STIFF * rows[eq].T @ rows[eq]
+            g = grad - _STIFF * rows[eq].T @ hi[eq]
+            keep = ~eq if level == 2 else np.zeros(eq.shape, dtype=bool)
+            a, lo, hi = rows[keep], lo[keep], hi[keep]
+        dx, ok = solve_qp(h, g, a, row_bounds=(lo, hi), box=box)
+        if ok:
+            break
+    return dx, ok, level
