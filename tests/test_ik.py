@@ -463,16 +463,21 @@ def test_a_humanoid_keeps_its_thighs_off_the_furniture(robots: dict[str, RobotMo
     front = float((centres[thighs, 0] + spheres.radii[thighs]).max())
     counter = trimesh.creation.box(extents=(0.6, 2.0, 0.6))
     counter.apply_translation((front + 0.03 + 0.3, 0.0, 0.3))  # its front 3 cm before the thighs, 60 cm high
-    solver = IKSolver(robot, IKConfig(self_collision=False), SceneDistance({"counter": counter}))
-    q = np.array(robot.q_home)
-    start = solver.clearance(q)
-    assert start == pytest.approx(0.03 - IKConfig().scene_margin, abs=0.002)  # a thigh is the closest
     targets = IKTargets(root=_root(robot), feet=_feet(robot))
     pelvis = np.array(_root(robot))
     pelvis[0, 3] += 0.05  # the pelvis goal 5 cm into the counter: the thighs' rows hold the body back
-    for _ in range(30):
-        q, _ = solver.step(q, dataclasses.replace(targets, root=pelvis), 1.0 / 60.0)
-    assert solver.clearance(q) > -0.003
+    gaps = {}
+    for body_margin in (0.0, 0.02):  # the body's extra margin (its lag in MuJoCo) holds it 2 cm farther
+        config = IKConfig(self_collision=False, body_margin_floating=body_margin)
+        solver = IKSolver(robot, config, SceneDistance({"counter": counter}))
+        q = np.array(robot.q_home)
+        start = solver.clearance(q)
+        assert start == pytest.approx(0.03 - config.scene_margin, abs=0.002)  # a thigh is the closest
+        for _ in range(30):
+            q, _ = solver.step(q, dataclasses.replace(targets, root=pelvis), 1.0 / 60.0)
+        gaps[body_margin] = solver.clearance(q)  # beyond scene_margin
+        assert gaps[body_margin] > body_margin - 0.003
+    assert gaps[0.0] < 0.01 and gaps[0.02] > gaps[0.0] + 0.01
 
 
 def test_an_infeasible_foot_row_softens_before_the_collision_rows_go() -> None:

@@ -74,6 +74,9 @@ class IKConfig:
     #: MuJoCo while the pelvis and waist lean under them, and at 1.5 cm a forearm and the other upper arm,
     #: planned apart, met in the simulation (benchmark: 5 more of 24 episodes succeeded at 3.5 cm)
     self_margin_floating: float = 0.035
+    #: [m] more scene margin for a floating-base robot's body spheres (torso, pelvis, head, thighs): they
+    #: lag their command by 2-3 cm in MuJoCo too (a head planned 2.7 cm from a shelf touched it)
+    body_margin_floating: float = 0.02
     #: [m] beyond the margin: farther pairs get no constraint row. A row binds only when one step would
     #: close ``collision_gain`` of the gap, but a first frame's solve takes large steps: at 0.10 m (6 %
     #: faster, the same trajectories to 2e-7 rad on 6 benchmark cases) a perturbed episode's re-plan
@@ -111,6 +114,7 @@ class IKConfig:
             "scene_margin",
             "self_margin",
             "self_margin_floating",
+            "body_margin_floating",
             "candidate_slack",
         ):
             if not getattr(self, name) >= 0.0:
@@ -208,6 +212,10 @@ class IKSolver:
             s: np.flatnonzero(self.spheres.tips & (self.spheres.groups == GROUPS.index(s)))
             for s in ("left", "right")
         }
+        #: (S,) [m] scene margin beyond :attr:`IKConfig.scene_margin` of the body spheres (floating base)
+        body = self.spheres.groups == GROUPS.index("body")
+        extra = self.config.body_margin_floating if robot.floating else 0.0
+        self._body_extra = np.where(body, extra, 0.0) if extra > 0.0 and body.any() else None
         slack = self.config.candidate_slack
         self._cache = CandidateCache(slack) if slack > 0.0 else None
         self._world_memo: dict[bytes, tuple[F64, F64]] = {}
@@ -326,14 +334,17 @@ class IKSolver:
             heed &= self.spheres.groups != GROUPS.index(holder)
         self._layer = (scene, heed)
 
-    def _tip_extra(self, targets: IKTargets) -> F64 | None:
-        """(S,) [m] finger margins beyond :attr:`IKConfig.tip_margin` for ``targets``' contact closeness
-        (``None``: none)."""
+    def _extra_margin(self, targets: IKTargets) -> F64 | None:
+        """(S,) [m] scene margins beyond the configured ones: the fingers' for ``targets``' contact
+        closeness (beyond :attr:`IKConfig.tip_margin`), a floating robot's body spheres'
+        (:attr:`IKConfig.body_margin_floating`); ``None``: none."""
         cfg = self.config
         span = cfg.tip_margin_far - cfg.tip_margin
         if span <= 0.0:
-            return None
-        extra = np.zeros(self.spheres.radii.shape[0])
+            return None if self._body_extra is None else np.array(self._body_extra)
+        extra = (
+            np.zeros(self.spheres.radii.shape[0]) if self._body_extra is None else np.array(self._body_extra)
+        )
         for side, tips in self._tips.items():
             extra[tips] = span * (1.0 - targets.contact.get(side, 0.0))
         return extra
@@ -383,7 +394,7 @@ class IKSolver:
         lower[idx_v] = np.maximum(lower[idx_v], lo_q - q[idx_q])
         upper[idx_v] = np.minimum(upper[idx_v], hi_q - q[idx_q])
         upper = np.maximum(upper, lower)
-        rows, row_lo, min_slack = self._collision_rows(q, self._tip_extra(targets))
+        rows, row_lo, min_slack = self._collision_rows(q, self._extra_margin(targets))
         row_hi = np.full(row_lo.shape, np.inf)
         if robot.floating and targets.feet:
             eq_a, eq_b, in_a, in_lo, h_add, g_add = support_rows(
