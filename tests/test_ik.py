@@ -153,6 +153,33 @@ def test_collision_margin_to_a_wall_in_front_of_the_arm(robots: dict[str, RobotM
         IKConfig(tip_margin=0.01, tip_margin_far=0.005)
 
 
+def test_a_humanoid_keeps_wider_margins_for_its_lag(robots: dict[str, RobotModel]) -> None:
+    """A floating robot's fingers keep ``tip_margin_far_floating`` away from a contact and its body spheres
+    ``scene_margin + body_margin_floating`` (its hands and trunk lag their command in MuJoCo); at a contact
+    the fingers still close in to ``tip_margin``."""
+    robot = robots["humanoid"]
+    wall_x = 0.4  # the wall's near face [m], within arm's reach in front of the pelvis
+    wall = trimesh.creation.box(extents=(0.05, 2.0, 2.0))
+    wall.apply_translation([wall_x + 0.025, 0.0, 1.0])
+    scene = SceneDistance({"wall": wall})
+    config = IKConfig(max_step=0.01)  # small steps, as when tracking at 60 Hz (rows are linearized)
+    assert config.tip_margin_far_floating > config.tip_margin_far
+    solver = IKSolver(robot, config, scene)
+    goal = robot.frame_pose(robot.q_home, "right_tcp")
+    goal[:3, 3] = [0.7, -0.2, 1.1]  # behind the wall
+    targets = IKTargets(tcp={"right": goal}, root=_root(robot), feet=_feet(robot))
+    gaps = []
+    for contact in (0.0, 1.0):
+        closeness = dataclasses.replace(targets, contact={"right": contact})
+        result = solver.solve(robot.q_home, closeness, iterations=400)
+        clearance = scene.query(solver.sphere_centers(result.q))[0] - solver.spheres.radii
+        tips, body = solver.spheres.tips, solver.spheres.groups == 2
+        assert clearance[body].min() >= config.scene_margin + config.body_margin_floating - 2e-3
+        gaps.append(float(clearance[tips].min()))
+    assert gaps[0] >= config.tip_margin_far_floating - 2e-3, gaps
+    assert config.tip_margin - 2e-3 <= gaps[1] < config.tip_margin_far - 3e-3, gaps
+
+
 @pytest.mark.parametrize("name", ["dual_ur5e", "humanoid"])
 def test_arms_keep_the_self_margin_when_their_goals_cross(robots: dict[str, RobotModel], name: str) -> None:
     robot = robots[name]

@@ -69,6 +69,9 @@ class IKConfig:
     #: [m] that clearance away from contacts (:attr:`IKTargets.contact` 0; linear in between): the fingers
     #: pass furniture edges with room for the execution's tracking error, and close in only at a grasp
     tip_margin_far: float = 0.015
+    #: [m] that clearance on a floating-base robot (the humanoid), whose hands lag their command by 2-4 cm
+    #: in MuJoCo
+    tip_margin_far_floating: float = 0.035
     self_margin: float = 0.015  #: [m] clearance kept between the arms and between an arm and the body
     #: [m] that clearance on a floating-base robot (the humanoid): its arms lag their command by 2-4 cm in
     #: MuJoCo while the pelvis and waist lean under them, and at 1.5 cm a forearm and the other upper arm,
@@ -111,6 +114,7 @@ class IKConfig:
             "damping",
             "tip_margin",
             "tip_margin_far",
+            "tip_margin_far_floating",
             "scene_margin",
             "self_margin",
             "self_margin_floating",
@@ -121,10 +125,10 @@ class IKConfig:
                 raise ConfigError(f"IKConfig.{name} must be >= 0, got {getattr(self, name)}")
         if not 0.0 < self.collision_gain <= 1.0:
             raise ConfigError(f"IKConfig.collision_gain must be in (0, 1], got {self.collision_gain}")
-        if self.tip_margin_far < self.tip_margin:
+        if min(self.tip_margin_far, self.tip_margin_far_floating) < self.tip_margin:
             raise ConfigError(
-                f"IKConfig.tip_margin_far [m] must be >= tip_margin {self.tip_margin}, "
-                f"got {self.tip_margin_far}"
+                f"IKConfig.tip_margin_far and tip_margin_far_floating [m] must be >= tip_margin "
+                f"{self.tip_margin}, got {self.tip_margin_far} and {self.tip_margin_far_floating}"
             )
         if self.iterations < 1 or self.max_collision_rows < 0:
             raise ConfigError("IKConfig.iterations must be >= 1 and max_collision_rows >= 0")
@@ -336,10 +340,12 @@ class IKSolver:
 
     def _extra_margin(self, targets: IKTargets) -> F64 | None:
         """(S,) [m] scene margins beyond the configured ones: the fingers' for ``targets``' contact
-        closeness (beyond :attr:`IKConfig.tip_margin`), a floating robot's body spheres'
+        closeness (beyond :attr:`IKConfig.tip_margin`, up to ``tip_margin_far`` or on a floating robot
+        ``tip_margin_far_floating``), a floating robot's body spheres'
         (:attr:`IKConfig.body_margin_floating`); ``None``: none."""
         cfg = self.config
-        span = cfg.tip_margin_far - cfg.tip_margin
+        far = cfg.tip_margin_far_floating if self.robot.floating else cfg.tip_margin_far
+        span = far - cfg.tip_margin
         if span <= 0.0:
             return None if self._body_extra is None else np.array(self._body_extra)
         extra = (
