@@ -216,9 +216,18 @@ class IKSolver:
             s: np.flatnonzero(self.spheres.tips & (self.spheres.groups == GROUPS.index(s)))
             for s in ("left", "right")
         }
+        cfg, floating = self.config, robot.floating  # a floating base (humanoid) lags more: wider margins
+        #: the (scene, finger tip, self) margins [m] of this robot
+        self.margins = (
+            cfg.scene_margin,
+            cfg.tip_margin,
+            cfg.self_margin_floating if floating else cfg.self_margin,
+        )
+        #: [m] finger margin added away from a contact (up to ``tip_margin_far[_floating]``)
+        self._tip_span = (cfg.tip_margin_far_floating if floating else cfg.tip_margin_far) - cfg.tip_margin
         #: (S,) [m] scene margin beyond :attr:`IKConfig.scene_margin` of the body spheres (floating base)
         body = self.spheres.groups == GROUPS.index("body")
-        extra = self.config.body_margin_floating if robot.floating else 0.0
+        extra = cfg.body_margin_floating if floating else 0.0
         self._body_extra = np.where(body, extra, 0.0) if extra > 0.0 and body.any() else None
         slack = self.config.candidate_slack
         self._cache = CandidateCache(slack) if slack > 0.0 else None
@@ -343,16 +352,12 @@ class IKSolver:
         closeness (beyond :attr:`IKConfig.tip_margin`, up to ``tip_margin_far`` or on a floating robot
         ``tip_margin_far_floating``), a floating robot's body spheres'
         (:attr:`IKConfig.body_margin_floating`); ``None``: none."""
-        cfg = self.config
-        far = cfg.tip_margin_far_floating if self.robot.floating else cfg.tip_margin_far
-        span = far - cfg.tip_margin
-        if span <= 0.0:
-            return None if self._body_extra is None else np.array(self._body_extra)
-        extra = (
-            np.zeros(self.spheres.radii.shape[0]) if self._body_extra is None else np.array(self._body_extra)
-        )
-        for side, tips in self._tips.items():
-            extra[tips] = span * (1.0 - targets.contact.get(side, 0.0))
+        if self._tip_span <= 0.0 and self._body_extra is None:
+            return None
+        extra = np.zeros(self.spheres.radii.shape[0]) if self._body_extra is None else self._body_extra.copy()
+        if self._tip_span > 0.0:
+            for side, tips in self._tips.items():
+                extra[tips] = self._tip_span * (1.0 - targets.contact.get(side, 0.0))
         return extra
 
     def _collision_rows(self, q: F64, extra: F64 | None = None) -> tuple[F64, F64, float]:
@@ -427,14 +432,6 @@ class IKSolver:
         cfg = self.config
         pairs = self._pairs if cfg.self_collision else np.zeros((0, 2), dtype=np.int64)
         return pairs, self.margins
-
-    @property
-    def margins(self) -> tuple[float, float, float]:
-        """The (scene, finger tip, self) margins [m] (self: :attr:`IKConfig.self_margin_floating` on a
-        floating-base robot)."""
-        cfg = self.config
-        self_margin = cfg.self_margin_floating if self.robot.floating else cfg.self_margin
-        return cfg.scene_margin, cfg.tip_margin, self_margin
 
     def _world(self, q: F64, *, posed: bool = False) -> tuple[F64, F64]:
         """(F, 3) link bounding centres and (S, 3) sphere centres [m] at ``q`` (nq,), read-only, from the
