@@ -45,6 +45,7 @@ from hsi_retarget.grasp_depth import GraspDepthConfig, shape_grasps
 from hsi_retarget.grasp_windows import container_rims, grasp_windows
 from hsi_retarget.gripper_dwell import DwellConfig, add_gripper_dwell
 from hsi_retarget.joint_trajectory import ContactEvent, JointTrajectory
+from hsi_retarget.retarget import RetargetConfig, retarget
 from hsi_retarget.sources import human_motion_from_schedule
 
 _REPORT = "hsi/msg/TaskReport"
@@ -266,6 +267,19 @@ def test_counter_pick_and_place_succeeds_on_the_dual_arm(dual_arm: TaskOutcome) 
     assert traj is not None and traj.meta["gripper_dwell_s"] == pytest.approx(2 * 0.8 + 0.3)
     base = traj.q[:, :3]  # base x, y, yaw follow the schedule's root: it moves towards the counter
     assert np.ptp(base[:, 0]) > 0.05
+    assert "held" not in traj.meta  # held objects are off by default
+
+
+def test_a_grasped_object_rides_with_its_hand_as_ik_geometry(dual_arm: TaskOutcome) -> None:
+    schedule = dual_arm.schedule
+    assert schedule is not None
+    pipeline = PipelineConfig()
+    config = RetargetConfig(sample_rate=pipeline.sample_rate, grasp=pipeline.grasp, hold_objects=True)
+    traj = retarget(schedule, "dual_ur5e", load_scene("kitchen"), config)
+    (held,) = traj.meta["held"]  # the can, from the frame its grasp was reached
+    grasp = next(e for e in schedule.events() if e.contact_event == "grasp")
+    assert (held["hand"], held["object"]) == (grasp.hand, "can1")
+    assert held["time_s"] == pytest.approx(grasp.time, abs=0.1)
 
 
 def test_counter_pick_and_place_succeeds_on_the_humanoid(kitchen_cloud: LabelledCloud) -> None:

@@ -29,6 +29,7 @@ from hsi_planning.errors import ConfigError, RetargetError
 from hsi_retarget.candidates import CandidateCache
 from hsi_retarget.collision import GROUPS, SceneLayer, collision_rows, min_gap, robot_spheres
 from hsi_retarget.culling import LinkBounds
+from hsi_retarget.held_object import HeldObject, held_rows
 from hsi_retarget.humanoid_ik import SupportConfig, support_rows
 from hsi_retarget.mapping import BASE_JOINTS, LIFT_JOINT
 from hsi_retarget.path_clearance import path_gaps
@@ -88,6 +89,11 @@ class IKConfig:
     collision_gain: float = 0.5  #: [-] fraction of the gap to the margin one step may close
     max_collision_rows: int = 24  #: [-] closest pairs constrained per step
     self_collision: bool = True  #: [-] constrain left/right arm and arm/body spheres
+    #: [m] clearance kept between a held object's surface points and the scene
+    #: (:mod:`hsi_retarget.held_object`), shrinking with the hand's contact closeness (none at the grasp
+    #: and the release)
+    held_margin: float = 0.01
+    max_held_rows: int = 6  #: [-] closest points of one held object constrained per step
     #: [m] extra reach of the culled collision candidates, reused until a sphere moved half of it
     #: (:mod:`hsi_retarget.candidates`; the same rows, cheaper); 0: culled anew at every query
     candidate_slack: float = 0.05
@@ -119,6 +125,7 @@ class IKConfig:
             "self_margin",
             "self_margin_floating",
             "body_margin_floating",
+            "held_margin",
             "candidate_slack",
         ):
             if not getattr(self, name) >= 0.0:
@@ -130,8 +137,8 @@ class IKConfig:
                 f"IKConfig.tip_margin_far and tip_margin_far_floating [m] must be >= tip_margin "
                 f"{self.tip_margin}, got {self.tip_margin_far} and {self.tip_margin_far_floating}"
             )
-        if self.iterations < 1 or self.max_collision_rows < 0:
-            raise ConfigError("IKConfig.iterations must be >= 1 and max_collision_rows >= 0")
+        if self.iterations < 1 or self.max_collision_rows < 0 or self.max_held_rows < 0:
+            raise ConfigError("IKConfig.iterations must be >= 1, max_collision_rows and max_held_rows >= 0")
 
 
 @dataclass(frozen=True, eq=False)
@@ -211,6 +218,8 @@ class IKSolver:
         self._bounds = LinkBounds(self.spheres, pairs)
         self._pairs = pairs if self._bounds.pairs is None else self._bounds.pairs  # the very array: culled
         self._layer: SceneLayer | None = None
+        self._layer_holder = ""  #: the side exempt from :attr:`_layer` ('' none)
+        self._held: dict[str, HeldObject] = {}  #: side -> the object that hand holds
         #: finger spheres of each hand
         self._tips = {
             s: np.flatnonzero(self.spheres.tips & (self.spheres.groups == GROUPS.index(s)))
@@ -338,14 +347,60 @@ class IKSolver:
         the spheres of the ``holder`` side (the hand holding it, ``left``/``right``; '' none); ``None``
         removes it."""
         if scene is None:
-            self._layer = None
+            self._layer, self._layer_holder = None, ""
             return
         if holder not in ("", "left", "right"):
             raise RetargetError(f"set_part_scene: holder must be 'left', 'right' or '', got {holder!r}")
         heed = np.ones(self.spheres.radii.shape[0], dtype=bool)
         if holder:
             heed &= self.spheres.groups != GROUPS.index(holder)
-        self._layer = (scene, heed)
+        self._layer, self._layer_holder = (scene, heed), holder
+
+    def hold(self, held: HeldObject) -> None:
+        """From now on ``held`` moves with its hand's TCP and keeps :attr:`IKConfig.held_margin` from the
+        scene (and the opened part, unless that hand holds it) (:mod:`hsi_retarget.held_object`)."""
+        if held.side not in self._tcp_ids:
+            valid = list(self._tcp_ids)
+            raise RetargetError(f"hold: {self.robot.name} has no {held.side!r} hand; valid: {valid}")
+        self._held[held.side] = held
+
+    def release(self, side: str | None = None) -> None:
+        """The hand ``side`` lets go of what it holds (``None``: both)."""
+        if side is None:
+            self._held.clear()
+        else:
+            self._held.pop(side, None)
+
+    @property
+    def held(self) -> dict[str, HeldObject]:
+        """side -> the object that hand holds (a copy)."""
+        return dict(self._held)
+
+    def _held_rows(self, targets: IKTargets) -> tuple[F64, F64]:
+        """Rows A (k, nv) and lower bounds (k,) keeping the held objects off the scene."""
+        cfg, nv = self.config, self.robot.nv
+        blocks, lows = [np.zeros((0, nv))], [np.zeros(0)]
+        for side, held in self._held.items():
+            closeness = targets.contact.get(side, 0.0)
+            if closeness >= 1.0:  # resting on its support at the grasp or the release
+                continue
+            layers = [] if self.scene is None else [self.scene]
+            if self._layer is not None and self._layer_holder != side:
+                layers.append(self._layer[0])
+            fid = self._tcp_ids[side]
+            rows, low = held_rows(
+                held,
+                np.asarray(self._data.oMf[fid].homogeneous),
+                self._frame_jacobian(fid),
+                layers,
+                margin=cfg.held_margin * (1.0 - closeness),
+                activation=cfg.activation_distance,
+                gain=cfg.collision_gain,
+                max_rows=cfg.max_held_rows,
+            )
+            blocks.append(rows)
+            lows.append(low)
+        return np.vstack(blocks), np.concatenate(lows)
 
     def _extra_margin(self, targets: IKTargets) -> F64 | None:
         """(S,) [m] scene margins beyond the configured ones: the fingers' for ``targets``' contact
@@ -406,6 +461,9 @@ class IKSolver:
         upper[idx_v] = np.minimum(upper[idx_v], hi_q - q[idx_q])
         upper = np.maximum(upper, lower)
         rows, row_lo, min_slack = self._collision_rows(q, self._extra_margin(targets))
+        if self._held:
+            more, more_lo = self._held_rows(targets)
+            rows, row_lo = np.vstack([rows, more]), np.concatenate([row_lo, more_lo])
         row_hi = np.full(row_lo.shape, np.inf)
         if robot.floating and targets.feet:
             eq_a, eq_b, in_a, in_lo, h_add, g_add = support_rows(

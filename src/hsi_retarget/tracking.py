@@ -12,18 +12,21 @@ second pass starts where its arm tasks first weigh in, from the first pass's :cl
 from __future__ import annotations
 
 import logging
+import math
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pinocchio as pin
+import trimesh
 from numpy.typing import NDArray
 
 from hsi_retarget.arm_branch import ArmBranch, find_branches, missed_contacts
 from hsi_retarget.carry_correction import carry_frames, correct_carry
 from hsi_retarget.grasp_windows import GraspWindow
+from hsi_retarget.held_object import attach
 from hsi_retarget.human_motion import SIDES
 from hsi_retarget.humanoid_ik import Footsteps, plan_footsteps
 from hsi_retarget.ik import IKSolver, IKTargets
@@ -101,6 +104,7 @@ def track(
     arm: Sequence[ArmBranch] = (),
     trace: bool = False,
     resume: tuple[int, Trace] | None = None,
+    objects: Mapping[str, trimesh.Trimesh] | None = None,
 ) -> tuple[F64, dict[str, F64], dict[str, F64], dict[str, Any]]:
     """Frame-by-frame IK of ``goals``: configurations (T, nq), TCP position [m] and orientation [rad] errors
     per side (T,) (NaN where inactive) and diagnostics (fallbacks, clearance, footsteps; with ``events``
@@ -113,7 +117,10 @@ def track(
     ``diag["part"]``, ``diag["part_fraction"]``), and with ``events`` the grasps of its contents follow it
     (:func:`~hsi_retarget.part_scene.follow_part`). With ``trace`` ``diag["trace"]`` keeps the per-frame state
     (:class:`Trace`); ``resume`` = (frame k, a trace of these goals without ``arm``) takes frames before k
-    from it (the targets there are the same) and tracks on from k."""
+    from it (the targets there are the same) and tracks on from k. ``objects``: name -> world mesh at rest
+    of the free objects; with ``events``, each one grasped is collision geometry of its hand from the
+    frame its grasp was reached (within ``cfg.held_reach``) until its release
+    (:mod:`hsi_retarget.held_object`; ``diag["held"]`` lists them)."""
     n = goals.t.shape[0]
     feet = plan_footsteps(robot, goals.t, goals.root, cfg.support) if robot.floating else None
     q = nominal_configuration(robot, goals.root[0], float(goals.lift[0]))
@@ -132,6 +139,8 @@ def track(
     before: tuple[dict[str, float], dict[str, float]] | None = None  # the last errors measured
     start = 0
     posed: tuple[int, PartPhase] | None = None
+    holds = _holds(goals.t, carries) if objects else []
+    held_log: list[dict[str, Any]] = []
     if resume is not None and resume[0] > 0:
         start, old = resume
         if old.posed is not None and old.posed[0] < start:
@@ -145,6 +154,10 @@ def track(
         versions = [v for v in old.versions if v[0] < start]
         if versions:
             goals, corrections = versions[-1][1], list(versions[-1][2])
+        for g, r, hand, name in holds:  # objects held across the resumed frame
+            if g < start <= r:
+                miss = float(old.pos_err[hand][g])
+                _hold(solver, robot, objects, (name, hand), qs[g], part=part, miss=miss, cfg=cfg)
         was = {s for s in goals.tcp if np.isfinite(old.pos_err[s][start - 1])}
         before = (
             {s: float(old.pos_err[s][start - 1]) for s in was},
@@ -161,6 +174,9 @@ def track(
         if now[0] is not layer[0] or now[1] != layer[1]:
             layer = now
             solver.set_part_scene(*layer)
+        for _, r, hand, _ in holds:
+            if r == i:  # the hand opens: what it held stays behind
+                solver.release(hand)
         for s, idx in fingers.items():  # the fingers are no IK variables: set to their opening
             if np.isfinite(goals.finger[s][i]):
                 q[idx] = goals.finger[s][i]
@@ -203,9 +219,17 @@ def track(
         before = (pe, oe)
         for s in pe:
             pos_err[s][i], ori_err[s][i] = pe[s], oe[s]
+        for g, r, hand, name in holds:
+            if g == i and r > i:  # the grasp reached: the object moves with the hand
+                miss = pe.get(hand, math.inf)
+                if _hold(solver, robot, objects, (name, hand), q, part=part, miss=miss, cfg=cfg):
+                    held_log.append({"hand": hand, "object": name, "time_s": float(goals.t[i])})
         fallbacks_to[i], clear_to[i] = fallbacks, min_clear
     solver.set_part_scene(None)
+    solver.release()
     diag: dict[str, Any] = {"qp_fallbacks": fallbacks, "min_collision_slack_m": float(min_clear)}
+    if objects:
+        diag["held"] = held_log
     if feet is not None:
         diag["footsteps"] = feet.steps
     if part is not None:
@@ -215,6 +239,42 @@ def track(
     if trace:
         diag["trace"] = Trace(qs, pos_err, ori_err, fallbacks_to, clear_to, versions, posed)
     return qs, pos_err, ori_err, diag
+
+
+def _holds(t: F64, carries: Mapping[int, Sequence[ContactEvent]]) -> list[tuple[int, int, str, str]]:
+    """(grasp frame, release frame (T: none), hand, object) of every carry of ``carries``
+    (:func:`~hsi_retarget.carry_correction.carry_frames`) in frames of ``t`` (T,) [s]."""
+    out = []
+    for g, events in sorted(carries.items()):
+        for e in events:
+            if e.kind != "grasp":
+                continue
+            release = next((v for v in events if v.kind == "release" and v.hand == e.hand), None)
+            r = t.shape[0] if release is None else int(np.searchsorted(t, release.time - 1e-9))
+            out.append((g, r, e.hand, e.object_name))
+    return out
+
+
+def _hold(
+    solver: IKSolver,
+    robot: RobotModel,
+    objects: Mapping[str, trimesh.Trimesh] | None,
+    what: tuple[str, str],
+    q: F64,
+    *,
+    part: PartPhase | None,
+    miss: float,
+    cfg: RetargetConfig,
+) -> bool:
+    """Attach the object ``what`` = (name, hand) to that hand at ``q`` (nq,) when its grasp was reached
+    within ``cfg.held_reach`` [m] (``miss``): moved with ``part`` when it stands in it. Whether it was."""
+    name, hand = what
+    if objects is None or name not in objects or not miss <= cfg.held_reach or hand not in robot.tcp_frames:
+        return False
+    frame = robot.tcp_frames[hand]
+    shift = part.shift() if part is not None and name in part.contents else None
+    solver.hold(attach(name, hand, objects[name], robot.fk(q, (frame,))[frame], shift))
+    return True
 
 
 def _reached(part: PartPhase, t: F64, qs: F64, i: int, robot: RobotModel) -> PartPhase:
@@ -267,11 +327,13 @@ def retrack_missed(
     part: PartPhase | None,
     events: Sequence[ContactEvent],
     windows: Sequence[GraspWindow],
+    objects: Mapping[str, trimesh.Trimesh] | None = None,
 ) -> tuple[F64, dict[str, Any]]:
     """Configurations (T, nq) and diagnostics of ``goals`` tracked again with arm configuration tasks at the
     grasps and releases of free objects that the ``first`` tracking (configurations, TCP position errors,
     diagnostics) missed by more than the trigger distance (:mod:`hsi_retarget.arm_branch`), when that
-    misses less in total at all those contacts (``windows``); else the first tracking's.
+    misses less in total at all those contacts (``windows``); else the first tracking's. ``objects``: the
+    held objects' meshes, as for :func:`track`.
     ``diag["arm_branches"]`` reports the search when there was one."""
     qs, pos_err, diag = first
     trace = diag.pop("trace", None)
@@ -306,7 +368,7 @@ def retrack_missed(
         start = min(int(np.argmax(b.weight > 0.0)) if (b.weight > 0.0).any() else n for b in branches)
         resume = (start, trace) if isinstance(trace, Trace) and start < n else None
         qs2, pos2, _, diag2 = track(
-            goals, robot, solver, cfg, part=part, events=events, arm=branches, resume=resume
+            goals, robot, solver, cfg, part=part, events=events, arm=branches, resume=resume, objects=objects
         )
         after = sum(float(np.nan_to_num(pos2[m.side][m.index], nan=m.error)) for m in contacts)
         report["contact_error_after_m"] = after
