@@ -155,9 +155,9 @@ def track(
         if versions:
             goals, corrections = versions[-1][1], list(versions[-1][2])
         for g, r, hand, name in holds:  # objects held across the resumed frame
-            if g < start <= r:
-                miss = float(old.pos_err[hand][g])
-                _hold(solver, robot, objects, (name, hand), qs[g], part=part, miss=miss, cfg=cfg)
+            miss = float(old.pos_err[hand][g]) if g < start <= r else math.inf
+            if _hold(solver, robot, objects, (name, hand), qs[g], part=part, miss=miss, cfg=cfg):
+                held_log.append({"hand": hand, "object": name, "time_s": float(goals.t[g])})
         was = {s for s in goals.tcp if np.isfinite(old.pos_err[s][start - 1])}
         before = (
             {s: float(old.pos_err[s][start - 1]) for s in was},
