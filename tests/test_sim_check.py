@@ -545,6 +545,14 @@ def test_humanoid_on_its_pelvis_anchor_stands_and_tracks_an_arm_motion() -> None
         assert abs(world.data.site_xpos[world.model.site(sole).id][2]) < 0.01
 
 
+def test_the_pelvis_anchor_stiffness_comes_from_the_config() -> None:
+    world = build_world(WorldConfig(robot="humanoid", anchor_solref=(0.01, 0.9)))
+    np.testing.assert_allclose(world.model.eq_solref[world.anchor_weld], (0.01, 0.9))
+    for bad in ((0.0, 1.0), (0.01, -1.0), (0.01,)):
+        with pytest.raises(ConfigError, match="anchor_solref"):
+            WorldConfig(robot="humanoid", anchor_solref=bad)  # type: ignore[arg-type]
+
+
 def test_report_json_markdown_and_files(world: SimWorld, tmp_path: object) -> None:
     traj = Script(world).hold(0.3).event("left", "grasp", "mug1").hold(1.7).build()
     report = execute(

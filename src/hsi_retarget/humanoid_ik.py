@@ -25,10 +25,12 @@ from scipy.spatial import ConvexHull
 from scipy.spatial.transform import Rotation, Slerp
 
 from hsi_planning.errors import ConfigError
+from hsi_retarget.foot_clearance import dodge
 
 if TYPE_CHECKING:
     from hsi_retarget.ik import IKTargets
     from hsi_retarget.robots import RobotModel
+    from hsi_retarget.scene_distance import SceneDistance
 
 F64 = NDArray[np.float64]
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
@@ -53,6 +55,11 @@ class SupportConfig:
     shift_time: float = 0.2  #: [s] weight shift over the stance foot before a swing
     swing_time: float = 0.35  #: [s] swing duration
     swing_height: float = 0.05  #: [m] apex of the swing arc
+    #: [m] a step's target sole keeps this far from the region an opened door or drawer sweeps
+    #: (:mod:`hsi_retarget.foot_clearance`)
+    keep_out_clearance: float = 0.03
+    max_dodge: float = 0.15  #: [m] farthest a target sole is moved for that (0: never moved)
+    dodge_step: float = 0.02  #: [m] spacing of the offsets tried
 
     def __post_init__(self) -> None:
         for name in ("foot_half_length", "foot_half_width", "com_gain", "step_threshold", "yaw_threshold"):
@@ -67,6 +74,11 @@ class SupportConfig:
             raise ConfigError("SupportConfig.com_margin must be in [0, foot half width) m")
         if min(self.com_weight, self.swing_height, self.step_crouch) < 0.0 or self.com_gain > 1.0:
             raise ConfigError("SupportConfig: com_weight, swing_height, step_crouch >= 0 and com_gain <= 1")
+        if not (self.keep_out_clearance >= 0.0 and self.max_dodge >= 0.0 and self.dodge_step > 0.0):
+            raise ConfigError(
+                "SupportConfig.keep_out_clearance and max_dodge must be >= 0 m and dodge_step > 0 m, got "
+                f"{self.keep_out_clearance}, {self.max_dodge}, {self.dodge_step}"
+            )
 
 
 def support_polygon(soles: list[F64], config: SupportConfig) -> tuple[F64, F64]:
@@ -150,8 +162,16 @@ def _stance(robot: RobotModel, pelvis: F64) -> dict[str, F64]:
     return out
 
 
-def plan_footsteps(robot: RobotModel, t: F64, pelvis: F64, config: SupportConfig | None = None) -> Footsteps:
-    """Soles for pelvis goals ``pelvis`` (T, 4, 4) at times ``t`` (T,) [s] (see the module docstring)."""
+def plan_footsteps(
+    robot: RobotModel,
+    t: F64,
+    pelvis: F64,
+    config: SupportConfig | None = None,
+    keep_out: SceneDistance | None = None,
+) -> Footsteps:
+    """Soles for pelvis goals ``pelvis`` (T, 4, 4) at times ``t`` (T,) [s] (see the module docstring); a
+    step's target sole is moved clear of ``keep_out`` (the region an opened part sweeps,
+    :func:`~hsi_retarget.foot_clearance.dodge`; the step's ``dodge_m`` says by how much)."""
     cfg = config or SupportConfig()
     n = int(t.shape[0])
     current = _stance(robot, pelvis[0])
@@ -178,7 +198,8 @@ def plan_footsteps(robot: RobotModel, t: F64, pelvis: F64, config: SupportConfig
         shift_from = pelvis[i][:2, 3]  # the weight moves smoothly from here to each stance foot in turn
         for swing in sorted(current, key=lambda s: -disp[s]):
             stance = "right" if swing == "left" else "left"
-            target = _limit_step(current[swing], goal[swing], cfg.max_step_length)
+            reach = _limit_step(current[swing], goal[swing], cfg.max_step_length)
+            target, moved = dodge(reach, keep_out, cfg)
             t_shift, t_end = t0 + cfg.shift_time, t0 + cfg.shift_time + cfg.swing_time
             over = current[stance][:2, 3]
             j = i
@@ -200,6 +221,7 @@ def plan_footsteps(robot: RobotModel, t: F64, pelvis: F64, config: SupportConfig
                     "t_start": t0,
                     "t_end": t_end,
                     "length_m": float(np.linalg.norm(target[:2, 3] - current[swing][:2, 3])),
+                    "dodge_m": moved,
                 }
             )
             current = {**current, swing: target}

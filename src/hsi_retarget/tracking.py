@@ -25,6 +25,7 @@ from numpy.typing import NDArray
 
 from hsi_retarget.arm_branch import ArmBranch, find_branches, missed_contacts
 from hsi_retarget.carry_correction import carry_frames, correct_carry
+from hsi_retarget.foot_clearance import part_sweep
 from hsi_retarget.grasp_windows import GraspWindow
 from hsi_retarget.held_object import attach
 from hsi_retarget.human_motion import SIDES
@@ -122,7 +123,11 @@ def track(
     frame its grasp was reached (within ``cfg.held_reach``) until its release
     (:mod:`hsi_retarget.held_object`; ``diag["held"]`` lists them)."""
     n = goals.t.shape[0]
-    feet = plan_footsteps(robot, goals.t, goals.root, cfg.support) if robot.floating else None
+    feet = (
+        plan_footsteps(robot, goals.t, goals.root, cfg.support, keep_out=part_sweep(part))
+        if robot.floating
+        else None
+    )
     q = nominal_configuration(robot, goals.root[0], float(goals.lift[0]))
     qs = np.zeros((n, robot.nq))
     carries, corrections = carry_frames(goals.t, events), []
