@@ -9,8 +9,9 @@ solution nearest to the nominal arm pose (its joints shifted by whole turns towa
 goal within ``tolerance`` without cutting into the collision margins becomes an :class:`ArmBranch`: a
 joint-space task on that arm (:attr:`~hsi_retarget.ik.IKTargets.arm`) at full weight from ``settle_s``
 before the contact to ``hold_s`` after it, eased in over ``lead_s`` before and out over ``release_s``
-after. :func:`~hsi_retarget.retarget.retarget` then tracks the goals again with these tasks. Fixed-base
-robots only (a humanoid's stance comes from its footstep plan).
+after. :func:`~hsi_retarget.retarget.retarget` then tracks the goals again with these tasks, and again
+with the weights scaled by each ``escalation`` factor while a contact still misses (:func:`scaled`).
+Fixed-base robots only (a humanoid's stance comes from its footstep plan).
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ from hsi_retarget.robots import RobotModel
 if TYPE_CHECKING:  # ik imports nothing from here; the types only
     from hsi_retarget.ik import IKSolver, IKTargets
 
-__all__ = ["ArmBranch", "ArmBranchConfig", "Missed", "find_branches", "missed_contacts"]
+__all__ = ["ArmBranch", "ArmBranchConfig", "Missed", "find_branches", "missed_contacts", "scaled"]
 
 F64 = NDArray[np.float64]
 
@@ -58,8 +59,16 @@ class ArmBranchConfig:
     stall_steps: int = 20
     stall_progress: float = 0.001  #: [m] see ``stall_steps``
     seed: int = 0  #: [-] random generator seed
+    #: [-] factors on ``weight`` of further re-trackings while a re-tracked contact still misses by more
+    #: than ``trigger`` (the arm pulled harder towards the found configuration before it enters a tight
+    #: space); the re-tracking that misses least in total is kept
+    escalation: tuple[float, ...] = (4.0,)
 
     def __post_init__(self) -> None:
+        if not all(math.isfinite(f) and f > 0.0 for f in self.escalation):
+            raise ConfigError(
+                f"ArmBranchConfig.escalation factors must be finite and > 0, got {self.escalation}"
+            )
         if self.seeds < 0 or self.iterations < 1 or self.stall_steps < 1 or not self.stall_progress >= 0.0:
             raise ConfigError(
                 "ArmBranchConfig.seeds must be >= 0, iterations and stall_steps >= 1, stall_progress >= 0 m, "
@@ -156,6 +165,11 @@ def find_branches(
             weight = cfg.weight * _profile(goals.t, m.time, cfg)
             out.append(ArmBranch(m.side, m.time, best[1], weight, best[2]))
     return out
+
+
+def scaled(branches: Sequence[ArmBranch], factor: float) -> list[ArmBranch]:
+    """``branches`` with their task weights (T,) [1/rad^2] multiplied by ``factor`` [-] (copies)."""
+    return [ArmBranch(b.side, b.time, b.q.copy(), b.weight * factor, b.error) for b in branches]
 
 
 def _turned_towards(robot: RobotModel, q: F64, ref: F64, iq: NDArray[np.int64]) -> F64:

@@ -23,7 +23,7 @@ import pinocchio as pin
 import trimesh
 from numpy.typing import NDArray
 
-from hsi_retarget.arm_branch import ArmBranch, find_branches, missed_contacts
+from hsi_retarget.arm_branch import ArmBranch, find_branches, missed_contacts, scaled
 from hsi_retarget.carry_correction import carry_frames, correct_carry
 from hsi_retarget.foot_clearance import part_sweep
 from hsi_retarget.grasp_windows import GraspWindow
@@ -372,14 +372,25 @@ def retrack_missed(
         # the targets differ from the first frame that an arm task weighs on: track on from there
         start = min(int(np.argmax(b.weight > 0.0)) if (b.weight > 0.0).any() else n for b in branches)
         resume = (start, trace) if isinstance(trace, Trace) and start < n else None
-        qs2, pos2, _, diag2 = track(
-            goals, robot, solver, cfg, part=part, events=events, arm=branches, resume=resume, objects=objects
-        )
-        after = sum(float(np.nan_to_num(pos2[m.side][m.index], nan=m.error)) for m in contacts)
-        report["contact_error_after_m"] = after
-        report["kept"] = after < report["contact_error_before_m"]
+        best: tuple[float, F64, dict[str, Any]] | None = None
+        for factor in (1.0, *branch_cfg.escalation):
+            qs2, pos2, _, diag2 = track(
+                goals, robot, solver, cfg, part=part, events=events, arm=scaled(branches, factor),
+                resume=resume, objects=objects,
+            )  # fmt: skip
+            after = sum(float(np.nan_to_num(pos2[m.side][m.index], nan=m.error)) for m in contacts)
+            report.setdefault("factors_tried", []).append(factor)
+            if best is None or after < best[0]:
+                best = (after, qs2, diag2)
+                report["factor"] = factor
+            still = [m for m in missed if not float(pos2[m.side][m.index]) <= branch_cfg.trigger]
+            if not still:
+                break
+        assert best is not None
+        report["contact_error_after_m"] = best[0]
+        report["kept"] = best[0] < report["contact_error_before_m"]
         if report["kept"]:
-            qs, diag = qs2, diag2
+            qs, diag = best[1], best[2]
     report["time_s"] = time.perf_counter() - started
     _LOG.info(
         "arm branches: %d of %d missed contacts reached by a static solve; tracked again: %s",
