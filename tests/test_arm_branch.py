@@ -1,6 +1,7 @@
 """Arm configurations for missed grasps: the static search finds one that reaches into a shelf compartment
 where the nominal arm pose gets stuck, the IK's arm task pulls to it, the task's weight profile, the
-missed-contact list, the second tracking resumed where the arm task starts, and config validation."""
+missed-contact list, the second tracking resumed where the arm task starts, its escalation while a grasp
+still misses, and config validation."""
 
 from __future__ import annotations
 
@@ -19,6 +20,7 @@ from hsi_retarget.arm_branch import (
     _profile,
     find_branches,
     missed_contacts,
+    scaled,
 )
 from hsi_retarget.grasp_windows import GraspWindow
 from hsi_retarget.ik import IKSolver, IKTargets
@@ -27,7 +29,7 @@ from hsi_retarget.mapping import RobotGoals, nominal_configuration
 from hsi_retarget.retarget import RetargetConfig
 from hsi_retarget.robots import RobotModel
 from hsi_retarget.scene_distance import SceneDistance
-from hsi_retarget.tracking import track
+from hsi_retarget.tracking import retrack_missed, track
 
 # A grasp of can1 deep in a compartment of the narrow shelf (benchmark case narrow_shelf_can/reshape/3 at
 # 8.6 s of its schedule): TCP goals [m], base pose and torso lift [m] as the mapping gave them.
@@ -166,6 +168,53 @@ def test_a_second_tracking_resumed_where_the_arm_task_starts_is_the_full_one(rob
     assert full[3]["carry_corrections"]  # the carry was re-aimed before frame 50: the resume takes that
 
 
+def test_re_tracking_escalates_only_while_a_grasp_still_misses(robot: RobotModel) -> None:
+    """The left hand's approach into the shelf compartment misses its grasp by ~3 cm; the re-tracking
+    reaches within ~1 cm. With a 5 mm trigger that is still a miss: each escalation factor is tracked in
+    turn and the least total miss kept; with a 1 cm trigger the first re-tracking ends the search."""
+    spec = generate_layouts(load_scene("narrow_shelf"), 4, 100007, LayoutConfig(reshape=True, target="can1"))[
+        3
+    ]
+    n = 150
+    t = np.linspace(0.0, 2.5, n)
+    u = np.clip(t / 2.0, 0.0, 1.0)
+    left = np.repeat(_LEFT[None], n, 0)
+    left[:, 0, 3] = 0.45 + (_LEFT[0, 3] - 0.45) * u * u * (3.0 - 2.0 * u)  # in from in front of the shelf
+    goals = _goals(n)
+    goals = dataclasses.replace(
+        goals,
+        t=t,
+        tcp={"left": left, "right": goals.tcp["right"]},
+        contact={"left": np.clip(4 * t - 6, 0, 1)},
+    )
+    events = (ContactEvent(2.0, "left", "grasp", "can1"),)
+    windows = [GraspWindow("left", "grasp", "can1", True, 2.0, (1.5, 2.0), (2.0, 2.5))]
+    reports = {}
+    for trigger, escalation in ((0.005, ()), (0.005, (4.0, 16.0)), (0.01, (4.0, 16.0))):
+        solver = IKSolver(robot, scene=SceneDistance.from_spec(spec, exclude=("can1", "bottle1")))
+        cfg = RetargetConfig(arm_branch=ArmBranchConfig(trigger=trigger, escalation=escalation))
+        qs, pos, _, diag = track(goals, robot, solver, cfg, events=events, trace=True)
+        assert pos["left"][119] > 0.02  # the first pass stops short of the can
+        _, out = retrack_missed(
+            goals, robot, solver, cfg, (qs, pos, diag), part=None, events=events, windows=windows
+        )
+        reports[trigger, escalation] = out["arm_branches"]
+    plain, escalated, reached = reports.values()
+    assert plain["factors_tried"] == [1.0] and plain["kept"]
+    assert escalated["factors_tried"] == [1.0, 4.0, 16.0]  # 1 cm off each time: never within 5 mm
+    assert escalated["contact_error_after_m"] <= plain["contact_error_after_m"] + 1e-12
+    assert escalated["factor"] in escalated["factors_tried"]
+    assert reached["factors_tried"] == [1.0] and reached["contact_error_after_m"] <= 0.01
+
+
+def test_scaled_branches_are_copies_with_scaled_weights() -> None:
+    b = ArmBranch("left", 1.0, np.zeros(3), np.array([0.0, 0.5, 1.0]), 0.002)
+    (s,) = scaled([b], 4.0)
+    np.testing.assert_array_equal(s.weight, [0.0, 2.0, 4.0])
+    s.q[0] = 1.0
+    assert b.q[0] == 0.0 and b.weight[2] == 1.0  # the original is untouched
+
+
 def test_weight_profile_eases_in_before_and_out_after_the_contact() -> None:
     cfg = ArmBranchConfig(lead_s=1.5, settle_s=0.5, hold_s=0.3, release_s=0.5)
     t = np.linspace(0.0, 10.0, 1001)
@@ -201,8 +250,10 @@ def test_missed_contacts_are_the_free_objects_beyond_the_tolerance() -> None:
         ("lead_s", float("nan")),
         ("tolerance", 0.0),
         ("trigger", -0.01),
+        ("escalation", (0.0,)),
+        ("escalation", (float("nan"),)),
     ],
 )
-def test_config_rejects_bad_values(field: str, value: float) -> None:
+def test_config_rejects_bad_values(field: str, value: object) -> None:
     with pytest.raises(ConfigError, match="ArmBranchConfig"):
         ArmBranchConfig(**{field: value})
