@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from hsi_planning.errors import ConfigError, PlanningError
@@ -41,6 +42,7 @@ from hsi_planning.scheduler import (
     ray_hit,
     resolve_click,
 )
+from hsi_planning.scheduler.stance import wrists_clear
 
 
 @pytest.fixture(scope="module")
@@ -176,6 +178,32 @@ def test_stance_reaches_targets_or_says_how_far() -> None:
     assert floor.clearance(pose.xy[None])[0] >= body.body_radius
     with pytest.raises(PlanningError, match=r"needs \d\.\d\d m of reach \(limit 0\.72 m\)"):
         choose_stance([StanceTarget("left", np.array([1.5, 1.5, 2.6]))], floor, None, body, StanceConfig())
+
+
+def test_stance_keeps_a_resting_wrist_out_of_the_scene() -> None:
+    """Points around where the cheapest stance puts the left ready wrist (a counter's edge, say): with that
+    wrist resting on the body, another stance is chosen whose ready wrist keeps ``wrist_clearance``."""
+    floor, body, config = _wall_map(), BodyConfig(), StanceConfig()
+    targets = [StanceTarget("right", np.array([1.45, 1.4, 0.3]))]
+    first = choose_stance(targets, floor, None, body, config, near=[0.0, 0.0])
+    wrist = first.wrist_offset("left", body.ready_offset)
+    grid = np.arange(-0.02, 0.021, 0.01)
+    blob = wrist + np.stack(np.meshgrid(grid, grid, grid, indexing="ij"), axis=-1).reshape(-1, 3)
+    tree = cKDTree(blob)
+    resting = [("left", body.ready_offset, 0.0)]
+    same = choose_stance(targets, floor, tree, body, config, near=[0.0, 0.0])  # not resting: not checked
+    np.testing.assert_array_equal(same.position, first.position)
+    moved = choose_stance(targets, floor, tree, body, config, near=[0.0, 0.0], resting=resting)
+    assert tree.query(moved.wrist_offset("left", body.ready_offset))[0] >= config.wrist_clearance
+    assert np.linalg.norm(moved.shoulder("right", body) - targets[0].point) <= body.reach_limit + 1e-9
+    assert wrists_clear(first, resting, tree, config.wrist_clearance) is False
+    everywhere = cKDTree(
+        np.array([[x, y, z] for x in range(-2, 4) for y in range(-2, 4) for z in (0.0, 1.0)])
+    )
+    with pytest.raises(PlanningError, match=r"a resting wrist within 1\.5 m"):
+        choose_stance(targets, floor, everywhere, body, StanceConfig(wrist_clearance=1.5), resting=resting)
+    with pytest.raises(ConfigError, match="wrist_clearance"):
+        StanceConfig(wrist_clearance=-0.01)
 
 
 def test_hip_pose_shoulders_lean_forward() -> None:

@@ -78,15 +78,29 @@ class TaskRun:
         def clear_step(pose: HipPose) -> bool:
             return floor.segment_clear(here, pose.xy, radius)
 
+        body, wrists = self.config.body, self.timeline.wrists
+        resting = [  # a carried object's size is room the wrist needs besides its own
+            (h, body.carry_offset, self._size(w.holding))
+            if w.mode == "carry"
+            else (h, body.ready_offset, 0.0)
+            for h, w in wrists.items()
+            if w.mode == "ready" or (w.mode == "carry" and w.carry_local is None)
+        ]
         return choose_stance(
             targets,
             floor,
             self.tree(),
-            self.config.body,
+            body,
             self.config.stance,
             near=here,
             accept=clear_step if step else None,
+            resting=resting,
         )
+
+    def _size(self, obj: str) -> float:
+        """[m] the largest extent of held ``obj``'s points (0 when its shape is unknown)."""
+        shape = self.shapes.get(obj)
+        return float(np.ptp(shape, axis=0).max()) if shape is not None and len(shape) else 0.0
 
     def move_time(self, a: F64, b: F64, speed: float | None = None) -> float:
         dist = float(np.linalg.norm(np.asarray(b) - np.asarray(a)))

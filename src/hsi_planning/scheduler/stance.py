@@ -3,9 +3,10 @@
 Candidates are the free floor cells (clearance >= body radius) within ``search_radius`` of the targets,
 headings facing the targets' centre (plus ``yaw_offsets``), and the body's postures (hip height, trunk
 pitch). A candidate is feasible when every target is within the reach limit of its hand's shoulder
-(and no nearer than ``min_reach``), not behind the shoulder by more than ``max_behind``, and the
-shoulders, neck and head keep ``torso_clearance`` from the scene's points. Among the feasible ones the
-cheapest wins::
+(and no nearer than ``min_reach``), not behind the shoulder by more than ``max_behind``, the
+shoulders, neck and head keep ``torso_clearance`` from the scene's points, and the wrists that rest on the
+body there (ready or carry pose: the next planned reach starts from them) keep ``wrist_clearance``.
+Among the feasible ones the cheapest wins::
 
     cost = walk_weight · |root − near| + posture_weight · posture index
            + comfort_weight · Σ_k (d_k − comfort_reach)² + yaw_weight · |yaw offset|
@@ -44,6 +45,9 @@ class StanceConfig:
     comfort_weight: float = 3.0  #: [1/m²] cost of the squared deviation from the comfortable reach
     yaw_weight: float = 0.2  #: [1/rad] cost of turning away from facing the targets
     max_behind: float = 0.15  #: [m] how far a target may lie behind its shoulder (along the heading)
+    #: [m] free space around a wrist resting on the body at the stance (a crouch in front of a counter put
+    #: the ready wrist inside it, and no planned reach could start from there); 0 = not checked
+    wrist_clearance: float = 0.05
 
     def __post_init__(self) -> None:
         if not (self.search_radius > 0.0 and 0.0 < self.step <= self.search_radius):
@@ -51,8 +55,8 @@ class StanceConfig:
         if not self.yaw_offsets:
             raise ConfigError("StanceConfig.yaw_offsets must list at least one heading offset [deg]")
         weights = (self.walk_weight, self.posture_weight, self.comfort_weight, self.yaw_weight)
-        if min(weights) < 0.0 or self.max_behind < 0.0:
-            raise ConfigError("StanceConfig weights and max_behind must be >= 0")
+        if min(weights) < 0.0 or self.max_behind < 0.0 or not self.wrist_clearance >= 0.0:
+            raise ConfigError("StanceConfig weights, max_behind and wrist_clearance must be >= 0")
 
 
 @dataclass(frozen=True)
@@ -72,6 +76,7 @@ def choose_stance(
     *,
     near: ArrayLike | None = None,
     accept: Callable[[HipPose], bool] | None = None,
+    resting: Sequence[tuple[Hand, tuple[float, float, float], float]] = (),
 ) -> HipPose:
     """The cheapest feasible stance reaching every target (see the module docstring).
 
@@ -83,6 +88,9 @@ def choose_stance(
         config: search settings.
         near: (2,) [m] current root (walking there costs ``walk_weight`` per metre); None = no cost.
         accept: extra test a stance must pass (e.g. a clear straight step from the current root).
+        resting: (hand, hip-frame wrist offset [m], extra clearance [m]) of the wrists resting on the body
+            (ready or carry pose), which keep ``config.wrist_clearance`` plus the extra (the size of an
+            object carried there) from ``scene_points``.
 
     Raises:
         PlanningError: no feasible stance; the message gives the closest miss.
@@ -143,11 +151,16 @@ def choose_stance(
     for flat in np.argsort(cost, axis=None)[: min(200, int(ok.sum()))]:
         c, y, p = np.unravel_index(int(flat), cost.shape)
         pose = HipPose(np.array([roots[c, 0], roots[c, 1], heights[p]]), float(yaw[c, y]), float(pitches[p]))
-        if torso_clear(pose, scene_points, body) and (accept is None or accept(pose)):
+        if (
+            torso_clear(pose, scene_points, body)
+            and wrists_clear(pose, resting, scene_points, config.wrist_clearance)
+            and (accept is None or accept(pose))
+        ):
             return pose
     raise PlanningError(
         f"every standing pose that reaches the targets near {np.round(centre, 2).tolist()} brings the "
-        f"shoulders or head within {body.torso_clearance} m of the scene (or fails the step test)"
+        f"shoulders or head within {body.torso_clearance} m of the scene, a resting wrist within "
+        f"{config.wrist_clearance} m (or fails the step test)"
     )
 
 
@@ -159,6 +172,21 @@ def torso_clear(pose: HipPose, scene_points: cKDTree | None, body: BodyConfig) -
     probes = np.vstack([pose.shoulder("left", body), pose.shoulder("right", body), pose.neck(body), head])
     dist, _ = scene_points.query(probes, k=1)
     return bool(np.all(np.asarray(dist) >= body.torso_clearance))
+
+
+def wrists_clear(
+    pose: HipPose,
+    resting: Sequence[tuple[Hand, tuple[float, float, float], float]],
+    scene_points: cKDTree | None,
+    clearance: float,
+) -> bool:
+    """Whether the ``resting`` wrists ((hand, hip-frame offset [m], extra clearance [m])) of ``pose``
+    keep ``clearance`` [m] plus their extra from the scene points."""
+    if scene_points is None or clearance <= 0.0 or not resting:
+        return True
+    probes = np.array([pose.wrist_offset(hand, offset) for hand, offset, _ in resting])
+    dist, _ = scene_points.query(probes, k=1)
+    return bool(np.all(np.asarray(dist) >= clearance + np.array([extra for _, _, extra in resting])))
 
 
 def yaw_between(a: ArrayLike, b: ArrayLike) -> float:
