@@ -167,6 +167,27 @@ def test_fast_marching_errors() -> None:
         plan_root_path(closed, [0.0, 0.0], [2.0, 0.0], [1.0, 0.0], radius=0.25, config=NavigationConfig())
 
 
+def test_a_root_start_a_little_too_close_leaves_through_clearer_cells() -> None:
+    """A body that stands 3 cm closer to the wall than its radius (a robot base pushed there) walks away
+    from it, its clearance never falling below the start's; 8 cm closer is more than the start slack."""
+    floor = _wall_map()
+    cfg = NavigationConfig()
+    goal, heading = np.array([0.0, -1.2]), np.array([0.0, -1.0])
+    start = np.array([0.78, 0.0])  # 0.22 m from the wall, body radius 0.25 m
+    path = plan_root_path(floor, start, goal, heading, radius=0.25, config=cfg)
+    np.testing.assert_allclose(path[0], start) and np.testing.assert_allclose(path[-1], goal)
+    dense = np.vstack([a + np.linspace(0, 1, 10)[:, None] * (b - a) for a, b in itertools.pairwise(path)])
+    clear = floor.clearance(dense)
+    assert clear.min() >= floor.clearance(start[None])[0] - 0.03
+    assert clear[len(clear) // 2 :].min() >= 0.25 - 0.03  # beyond the start: the full body radius
+    with pytest.raises(PlanningError, match=r"root start \[0\.83, 0\.0\].*a start may have 0\.05 m less"):
+        plan_root_path(floor, [0.83, 0.0], goal, heading, radius=0.25, config=cfg)
+    with pytest.raises(PlanningError, match="root start"):
+        plan_root_path(floor, start, goal, heading, radius=0.25, config=NavigationConfig(start_slack=0.0))
+    with pytest.raises(ConfigError, match="start_slack"):
+        NavigationConfig(start_slack=-0.01)
+
+
 def test_stance_reaches_targets_or_says_how_far() -> None:
     floor = _wall_map()
     body = BodyConfig()

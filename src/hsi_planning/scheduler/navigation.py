@@ -54,6 +54,10 @@ class NavigationConfig:
     #: there) without turning to walk along them
     side_step_length: float = 0.6
     smooth_window: int = 5  #: [cells] moving-average window of the path smoothing
+    #: [m] a root start (where the body stands now, e.g. a robot's base re-planning after a push) may have
+    #: up to this much less clearance than the body radius; the path leaves it through cells at least as
+    #: clear until it reaches the full clearance
+    start_slack: float = 0.05
 
     def __post_init__(self) -> None:
         for name in ("resolution", "walk_speed", "turn_speed", "keyframe_spacing", "approach_length"):
@@ -61,6 +65,8 @@ class NavigationConfig:
                 raise ConfigError(f"NavigationConfig.{name} must be > 0, got {getattr(self, name)}")
         if not 0.0 <= self.min_height < self.max_height:
             raise ConfigError("NavigationConfig needs 0 <= min_height < max_height [m]")
+        if not 0.0 <= self.start_slack < 0.5:
+            raise ConfigError(f"NavigationConfig.start_slack must be in [0, 0.5) m, got {self.start_slack}")
         if self.margin < 0.0 or self.approach_weight < 0.0 or self.smooth_window < 1:
             raise ConfigError("NavigationConfig: margin >= 0 m, approach_weight >= 0, smooth_window >= 1")
 
@@ -174,17 +180,24 @@ def plan_root_path(
         PlanningError: start or goal not clear, or no free path between them.
     """
     s, g = np.asarray(start, dtype=np.float64).reshape(2), np.asarray(goal, dtype=np.float64).reshape(2)
-    for label, p in (("start", s), ("goal", g)):
-        c = float(floor.clearance(p[None])[0])
-        if c < radius - 1e-9:
+    start_clear = float(floor.clearance(s[None])[0])
+    for label, p, c, slack in (
+        ("start", s, start_clear, config.start_slack),
+        ("goal", g, float(floor.clearance(g[None])[0]), 0.0),
+    ):
+        if c < radius - slack - 1e-9:
+            more = f" (a start may have {slack} m less)" if slack > 0.0 else ""
             raise PlanningError(
                 f"the root {label} {np.round(p, 3).tolist()} has {c:.3f} m clearance, less than the body "
-                f"radius {radius} m"
+                f"radius {radius} m{more}"
             )
     if np.linalg.norm(g - s) < 0.5 * floor.resolution:
         return np.vstack([s, g])
     centres = floor.cell_centres()
     free = floor.clearance_grid >= radius
+    if start_clear < radius:  # out of a tight start through cells at least as clear, within the deficit
+        near = np.linalg.norm(centres - s, axis=-1) <= radius - start_clear + 2.0 * floor.resolution
+        free |= near & (floor.clearance_grid >= start_clear - 0.5 * floor.resolution)
     gi = tuple(floor._cells(g[None])[0])
     si = tuple(floor._cells(s[None])[0])
     for idx in (gi, si):
