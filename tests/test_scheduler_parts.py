@@ -388,6 +388,28 @@ def test_aside_spots_keep_a_top_down_take_out_free_without_excluding_everything(
     assert all(not ((p[0] - start[0]) * -1.0 > -0.05 and abs(p[1] - start[1]) < 0.05) for _, p in strip)
 
 
+def test_aside_spots_are_offered_nearest_first_and_spread_out(kitchen: SceneWorld) -> None:
+    """The nearest spot comes first either way; the next ones keep ``spot_spread`` from every earlier one
+    (a spot next to one the hand could not reach fails alike), where without spreading they crowd it."""
+    from hsi_planning.scheduler.auxiliary import AuxiliaryConfig, free_spots
+
+    state = WorldState()
+    cloud = kitchen.state_cloud(state)
+    here = kitchen.object_position("can1", state)
+    crowded = free_spots(kitchen, state, "can1", cloud, config=AuxiliaryConfig(spot_spread=0.0), limit=8)
+    spread = free_spots(kitchen, state, "can1", cloud, config=AuxiliaryConfig(spot_spread=0.08), limit=8)
+    assert len(spread) == 8
+    np.testing.assert_array_equal(spread[0][1], crowded[0][1])
+    for k, (_, pos) in enumerate(spread):
+        assert all(np.linalg.norm(pos - q) >= 0.08 - 1e-9 for _, q in spread[:k])
+    gaps = [np.linalg.norm(a - b) for (_, a), (_, b) in itertools.combinations(crowded, 2)]
+    assert min(gaps) < 0.08  # unspread, neighbours of the nearest spot
+    dist = [float(np.linalg.norm(pos - here)) for _, pos in spread]
+    assert dist == sorted(dist)
+    with pytest.raises(ConfigError, match="spot_spread"):
+        AuxiliaryConfig(spot_spread=-0.01)
+
+
 def test_aside_spots_in_an_opened_drawer_lie_on_its_pulled_out_floor(kitchen: SceneWorld) -> None:
     from scipy.spatial import cKDTree
 
@@ -397,7 +419,7 @@ def test_aside_spots_in_an_opened_drawer_lie_on_its_pulled_out_floor(kitchen: Sc
 
     state = WorldState(opened=frozenset({"drawer_unit1/drawer1"}))
     cloud = kitchen.state_cloud(state)
-    config = AuxiliaryConfig()
+    config = AuxiliaryConfig(spot_spread=0.0)  # every spot, not a spread-out few
     spots = free_spots(kitchen, state, "mug2", cloud, config=config, limit=1000)
     in_drawer = np.array([p for name, p in spots if name == "drawer_unit1/drawer1"])
     assert len(in_drawer) > 10, "the pulled-out drawer floor has room for the mug"

@@ -16,7 +16,7 @@ out of a front opening (cabinets, shelves) blocks as well, nearest to the openin
 
 **Free spot.** Candidate spots on the open support surfaces (counters, tables, shelf boards; cabinet and
 drawer floors only when open) where the object's footprint holds no points, outside the target's take-out
-corridor, nearest first.
+corridor, nearest first (at least ``spot_spread`` apart).
 """
 
 from __future__ import annotations
@@ -54,6 +54,7 @@ class AuxiliaryConfig:
     palm_offset: float = 0.06  #: [m] wrist distance beyond the target's box along the approach axis
     spot_step: float = 0.02  #: [m] spacing of candidate free spots
     spot_margin: float = 0.02  #: [m] free margin around a spot's footprint
+    spot_spread: float = 0.08  #: [m] least distance between the spots offered (nearest first); 0 = any
     corridor_margin: float = 0.03  #: [m] extra width of the target's take-out corridor kept free
     #: [m] free height above the object on a spot reached from above (counters, tables, drawers): the
     #: gripper's length; a pulled-out drawer's floor still under the counter top has none
@@ -69,6 +70,7 @@ class AuxiliaryConfig:
             "hand_radius",
             "palm_offset",
             "spot_margin",
+            "spot_spread",
             "corridor_margin",
             "corridor_radius",
             "spot_headroom",
@@ -294,7 +296,13 @@ def free_spots(
             pos = np.array([p[0], p[1], support.top_z])
             found.append((float(np.linalg.norm(pos - here)), support.name, pos))
     found.sort(key=lambda f: f[0])
-    return [(name, pos) for _, name, pos in found[:limit]]
+    out: list[tuple[str, F64]] = []
+    for _, name, pos in found:  # nearest first, spread out: a spot next to a failed one fails alike
+        if all(np.linalg.norm(pos - q) >= config.spot_spread for _, q in out):
+            out.append((name, pos))
+            if len(out) == limit:
+                break
+    return out
 
 
 def _in_corridor(xy: F64, avoid: tuple[F64, F64, float], clearance: float) -> NDArray[np.bool_]:
