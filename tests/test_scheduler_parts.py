@@ -218,6 +218,10 @@ def test_stance_keeps_a_resting_wrist_out_of_the_scene() -> None:
     assert tree.query(moved.wrist_offset("left", body.ready_offset))[0] >= config.wrist_clearance
     assert np.linalg.norm(moved.shoulder("right", body) - targets[0].point) <= body.reach_limit + 1e-9
     assert wrists_clear(first, resting, tree, config.wrist_clearance) is False
+    gap = float(tree.query(moved.wrist_offset("left", body.ready_offset))[0])
+    carried = [("left", body.ready_offset, gap)]  # an object that size held there: too close now
+    assert wrists_clear(moved, carried, tree, config.wrist_clearance) is False
+    assert wrists_clear(moved, carried, tree, 0.0) is True  # 0: not checked
     everywhere = cKDTree(
         np.array([[x, y, z] for x in range(-2, 4) for y in range(-2, 4) for z in (0.0, 1.0)])
     )
