@@ -17,7 +17,15 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from hsi_nodes.demo.pipeline import PipelineConfig, TaskOutcome, make_demo_planner, resolve_task, run_task
+from hsi_nodes.demo.pipeline import (
+    ROBOT_BODY_RADIUS,
+    ROBOT_WRIST_CLEARANCE,
+    PipelineConfig,
+    TaskOutcome,
+    make_demo_planner,
+    resolve_task,
+    run_task,
+)
 from hsi_nodes.demo.runner import scene_cloud
 from hsi_nodes.demo.summary import REQUIRED_KEYS
 from hsi_nodes.demo.tasks import VARIANTS, DemoTask, demo_tasks
@@ -125,6 +133,13 @@ def test_a_robot_hand_needs_more_room_past_a_neighbour_than_a_human_hand() -> No
         assert aux.hand_radius > AuxiliaryConfig().hand_radius
         assert find_blockers(world, planner, "can1", WorldState(), hand="right", config=aux) == ["bottle1"]
     assert find_blockers(world, planner, "can1", WorldState(), hand="right", config=AuxiliaryConfig()) == []
+
+
+def test_only_the_humanoid_keeps_its_resting_wrists_clear_at_a_stance() -> None:
+    """The humanoid's hands start where the human's ready wrists are, the dual arm's at their home pose."""
+    clear = {r: PipelineConfig(robot=r).scheduler_config().stance.wrist_clearance for r in ROBOT_BODY_RADIUS}
+    assert clear == {"dual_ur5e": 0.0, "humanoid": ROBOT_WRIST_CLEARANCE["humanoid"]}
+    assert clear["humanoid"] > 0.0
 
 
 # ---------------------------------------------------------------------------- grasp depth and dwell

@@ -204,7 +204,7 @@ def test_stance_reaches_targets_or_says_how_far() -> None:
 def test_stance_keeps_a_resting_wrist_out_of_the_scene() -> None:
     """Points around where the cheapest stance puts the left ready wrist (a counter's edge, say): with that
     wrist resting on the body, another stance is chosen whose ready wrist keeps ``wrist_clearance``."""
-    floor, body, config = _wall_map(), BodyConfig(), StanceConfig()
+    floor, body, config = _wall_map(), BodyConfig(), StanceConfig(wrist_clearance=0.05)
     targets = [StanceTarget("right", np.array([1.45, 1.4, 0.3]))]
     first = choose_stance(targets, floor, None, body, config, near=[0.0, 0.0])
     wrist = first.wrist_offset("left", body.ready_offset)

@@ -50,6 +50,7 @@ __all__ = [
     "DEMO_PLANNERS",
     "ROBOT_BODY_RADIUS",
     "ROBOT_HAND_RADIUS",
+    "ROBOT_WRIST_CLEARANCE",
     "PipelineConfig",
     "TaskOutcome",
     "make_demo_planner",
@@ -72,6 +73,12 @@ ROBOT_HAND_RADIUS = 0.05
 #: straight final approach, and a planned wrist path winding past a neighbour leaves their palm and
 #: wrist no room.
 ROBOT_CORRIDOR_RADIUS = 0.05
+#: Free space the scheduler keeps around a wrist resting on the body at a stance [m]
+#: (:attr:`~hsi_planning.scheduler.StanceConfig.wrist_clearance`). The humanoid's hands start where the
+#: human's do: a crouch that put the ready wrist inside a counter left no planned reach (4 more humanoid
+#: episodes schedule). The dual arm's grippers start at their own home pose, not the human's ready wrist,
+#: and on its benchmark the stances this moved lost 9 episodes: off there.
+ROBOT_WRIST_CLEARANCE: dict[str, float] = {"dual_ur5e": 0.0, "humanoid": 0.05}
 #: Planner names of the demo: the scheduler's, plus the minimum-jerk baseline.
 DEMO_PLANNERS: tuple[str, ...] = tuple(dict.fromkeys((*SCHEDULER_PLANNERS, "minjerk")))
 
@@ -114,6 +121,7 @@ class PipelineConfig:
 
         overrides = {
             "body": {"body_radius": self.root_radius},
+            "stance": {"wrist_clearance": ROBOT_WRIST_CLEARANCE.get(self.robot, 0.0)},
             "auxiliary": {"hand_radius": ROBOT_HAND_RADIUS, "corridor_radius": ROBOT_CORRIDOR_RADIUS},
         }
         return from_mapping(SchedulerConfig, overrides, where="demo")

@@ -47,7 +47,7 @@ class StanceConfig:
     max_behind: float = 0.15  #: [m] how far a target may lie behind its shoulder (along the heading)
     #: [m] free space around a wrist resting on the body at the stance (a crouch in front of a counter put
     #: the ready wrist inside it, and no planned reach could start from there); 0 = not checked
-    wrist_clearance: float = 0.05
+    wrist_clearance: float = 0.0
 
     def __post_init__(self) -> None:
         if not (self.search_radius > 0.0 and 0.0 < self.step <= self.search_radius):
