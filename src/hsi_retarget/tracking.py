@@ -372,21 +372,19 @@ def retrack_missed(
         # the targets differ from the first frame that an arm task weighs on: track on from there
         start = min(int(np.argmax(b.weight > 0.0)) if (b.weight > 0.0).any() else n for b in branches)
         resume = (start, trace) if isinstance(trace, Trace) and start < n else None
-        best: tuple[float, F64, dict[str, Any]] | None = None
-        for factor in (1.0, *branch_cfg.escalation):
+        best = (math.inf, qs, diag)
+        report["factors_tried"] = []
+        for factor in (1.0, *branch_cfg.escalation):  # harder pulls only while a contact still misses
+            arm = scaled(branches, factor)
             qs2, pos2, _, diag2 = track(
-                goals, robot, solver, cfg, part=part, events=events, arm=scaled(branches, factor),
-                resume=resume, objects=objects,
-            )  # fmt: skip
+                goals, robot, solver, cfg, part=part, events=events, arm=arm, resume=resume, objects=objects
+            )
             after = sum(float(np.nan_to_num(pos2[m.side][m.index], nan=m.error)) for m in contacts)
-            report.setdefault("factors_tried", []).append(factor)
-            if best is None or after < best[0]:
-                best = (after, qs2, diag2)
-                report["factor"] = factor
-            still = [m for m in missed if not float(pos2[m.side][m.index]) <= branch_cfg.trigger]
-            if not still:
+            report["factors_tried"].append(factor)
+            if after < best[0]:
+                best, report["factor"] = (after, qs2, diag2), factor
+            if all(pos2[m.side][m.index] <= branch_cfg.trigger for m in missed):
                 break
-        assert best is not None
         report["contact_error_after_m"] = best[0]
         report["kept"] = best[0] < report["contact_error_before_m"]
         if report["kept"]:
