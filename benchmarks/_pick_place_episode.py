@@ -8,10 +8,11 @@ on arm links, the target moved up to 5 cm before its grasp) and a re-plan hook. 
 re-plans like the pipeline does (the layout with the object at its new place is re-observed, the task
 re-resolved and re-scheduled, then turned into a robot trajectory by the pipeline's ``robot_trajectory``),
 finds the moment of the new trajectory closest to the robot's current configuration and continues from
-there after a short joint-space blend. The re-plan keeps the executed plan's grasping hand, and one whose
-gripper events contradict what the hands hold at that moment (a hand holding the door told to grasp the
-object) is not taken: the executed plan goes on. Pushes are not re-planned (the controller recovers).
-The wrapper goes away when ``run_task`` takes a perturbation config.
+there after a short joint-space blend. The re-plan keeps the executed plan's grasping hand and the hand
+that opened the door or drawer (``DemoTask.door_hand``), is joined only at a moment where its hands hold
+what the robot's hold now, and one whose gripper events contradict what the hands hold (a hand holding the
+door told to grasp the object) is not taken: the executed plan goes on. Pushes are not re-planned (the
+controller recovers). The wrapper goes away when ``run_task`` takes a perturbation config.
 
 IK time: ``trajectory.meta`` of the retargeting (``ik_time_s`` over ``frames``: per-frame differential IK,
 the arm-branch search and second tracking pass where a grasp was missed, joint smoothing and residuals of
@@ -97,13 +98,24 @@ def _plan_trajectory(task: DemoTask, spec: SceneSpec, planner: Planner, cfg: Pip
     return robot_trajectory(schedule, spec, cfg)
 
 
-def join(new: Any, q_now: np.ndarray, t_now: float, world: Any) -> Any:
+def join(new: Any, q_now: np.ndarray, t_now: float, world: Any, held: dict[str, str] | None = None) -> Any:
     """The part of trajectory ``new`` from its configuration closest to ``q_now`` (searched within
-    :data:`MATCH_WINDOW_S` of ``t_now`` [s]), preceded by a blend from ``q_now``; time 0 = now."""
+    :data:`MATCH_WINDOW_S` of ``t_now`` [s]; with ``held`` (hand -> body held now) only among the moments
+    where the re-plan's hands hold the same), preceded by a blend from ``q_now``; time 0 = now.
+
+    Raises:
+        RetargetError: no such moment (the re-plan opens the door with the other hand, say)."""
     from hsi_retarget.joint_trajectory import JointTrajectory
 
     near = np.flatnonzero(np.abs(new.t - t_now) <= MATCH_WINDOW_S)
     near = near if near.size else np.arange(len(new.t))
+    if held is not None:  # only where the re-plan's hands hold what the robot's hold now
+        near = near[[holds_at(new.events, float(new.t[k])) == held for k in near]]
+        if not near.size:
+            raise RetargetError(
+                f"re-plan not taken: within {MATCH_WINDOW_S} s of {t_now:.1f} s its hands never hold "
+                f"what they hold now ({held or 'nothing'})"
+            )
     k = int(near[np.argmin(np.abs(new.q[near] - q_now[None, :]).max(axis=1))])
     robot = world.robot
     blend = BLEND_MIN_S
@@ -119,6 +131,29 @@ def join(new: Any, q_now: np.ndarray, t_now: float, world: Any) -> Any:
     )
     meta = {**new.meta, "replan_join_time_s": t0, "replan_blend_s": blend}
     return JointTrajectory(new.robot, times, qs, new.joint_names, events, meta, new.floating_index)
+
+
+def holds_at(events: Sequence[Any], t: float) -> dict[str, str]:
+    """Hand -> object held at time ``t`` [s] after the gripper ``events`` before it."""
+    held: dict[str, str] = {}
+    for e in sorted((e for e in events if e.time < t), key=lambda e: e.time):
+        if e.kind == "grasp":
+            held[e.hand] = e.object_name
+        else:
+            held.pop(e.hand, None)
+    return held
+
+
+def opening_hand(trajectory: Any, spec: SceneSpec, target: str) -> str:
+    """The hand a trajectory first grasps a door or drawer (not a free object) with before it grasps
+    ``target``: ``left``, ``right`` or '' (none)."""
+    free = {o.name for o in spec.objects}
+    for e in sorted(trajectory.events, key=lambda e: e.time):
+        if e.kind == "grasp" and e.object_name == target:
+            return ""
+        if e.kind == "grasp" and e.object_name not in free:
+            return str(e.hand)
+    return ""
 
 
 def grasping_hand(trajectory: Any, target: str) -> str:
@@ -156,7 +191,7 @@ def perturbed_execution(
     original = sim_check.execute
     task = demo_task(case)
     record.update(events=[], replans=0, replan_wall_s=0.0, replan_errors=[], replan_ik_fps=[])
-    roles = {"hand": ""}  #: the executed plan's grasping hand, kept by a re-plan
+    roles = {"hand": "", "door": ""}  #: the executed plan's grasping and opening hands, kept by a re-plan
 
     def hook(world: Any, event: Any, start: float) -> Any:
         if not isinstance(event, TargetMove):
@@ -164,10 +199,11 @@ def perturbed_execution(
         t0 = time.perf_counter()
         try:
             spec = moved_object(case.spec, event.object_name, event.offset)
-            new = _plan_trajectory(dataclasses.replace(task, hand=roles["hand"]), spec, planner, cfg)
+            replan = dataclasses.replace(task, hand=roles["hand"], door_hand=roles["door"])
+            new = _plan_trajectory(replan, spec, planner, cfg)
             t_now = world.time - start
-            joined = join(new, world.robot_q(), t_now, world)
             held = {h: body for (h, body), eq in world.welds.items() if world.data.eq_active[eq]}
+            joined = join(new, world.robot_q(), t_now, world, held)
             conflict = grasp_conflict(joined.events, held)
             if conflict:  # the executed plan goes on (the target moved at most a few cm)
                 raise RetargetError(f"re-plan not taken: {conflict}")
@@ -185,6 +221,7 @@ def perturbed_execution(
         goal = kwargs.get("goal")
         target = goal.object_name if goal is not None else ""
         roles["hand"] = grasping_hand(trajectory, target)
+        roles["door"] = opening_hand(trajectory, case.spec, target)
         events = random_perturbations(world, trajectory, PerturbationConfig(seed=seed), target=target)
         record["events"] = [event_dict(e) for e in events]
         start = world.time

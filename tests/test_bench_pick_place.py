@@ -161,3 +161,55 @@ def test_a_replan_must_follow_what_the_hands_hold(repo_root: Path) -> None:
     why = episode.grasp_conflict(swapped[:1], {"right": door})
     assert "right hand grasps bottle2 while it holds cabinet1/door1" in why
     assert "left hand releases" in episode.grasp_conflict(swapped[1:], {"right": door})
+
+
+def test_a_replan_joins_where_its_hands_hold_what_they_hold_now(repo_root: Path) -> None:
+    from hsi_planning.errors import RetargetError
+    from hsi_planning.scene_paths import load_scene
+    from hsi_retarget.joint_trajectory import ContactEvent, JointTrajectory
+    from hsi_retarget.robots import RobotModel
+
+    sys.path.insert(0, str(repo_root / "benchmarks"))
+    try:
+        import _pick_place_episode as episode
+    finally:
+        sys.path.remove(str(repo_root / "benchmarks"))
+    spec = load_scene("kitchen")
+    door, bottle = "cabinet1/door1", "bottle2"
+    events = (
+        ContactEvent(1.0, "right", "grasp", door),
+        ContactEvent(3.0, "left", "grasp", bottle),
+        ContactEvent(5.0, "right", "release", door),
+    )
+    assert episode.holds_at(events, 0.5) == {} and episode.holds_at(events, 2.0) == {"right": door}
+    assert episode.holds_at(events, 4.0) == {"right": door, "left": bottle}
+    assert episode.holds_at(events, 6.0) == {"left": bottle}
+
+    class _Traj:
+        pass
+
+    traj = _Traj()
+    traj.events = events  # type: ignore[attr-defined]
+    assert episode.opening_hand(traj, spec, bottle) == "right"
+    traj.events = events[1:]  # type: ignore[attr-defined]  # the bottle grasped first: nothing opened before
+    assert episode.opening_hand(traj, spec, bottle) == ""
+
+    robot = RobotModel("dual_ur5e")
+
+    class _World:
+        pass
+
+    world = _World()
+    world.robot = robot  # type: ignore[attr-defined]
+    t = np.linspace(0.0, 6.0, 61)
+    qs = np.repeat(robot.q_home[None, :], t.shape[0], axis=0)
+    qs[:, robot.q_index("left_shoulder_pan_joint")] += np.linspace(0.0, 0.6, t.shape[0])
+    new = JointTrajectory("dual_ur5e", t, qs, robot.joint_names, events, {}, None)
+    q_now = qs[10].copy()  # the configuration of 1.0 s: before the re-plan's right hand holds the door
+    free = episode.join(new, q_now, 2.0, world)  # closest configuration anywhere within the window
+    assert free.meta["replan_join_time_s"] == pytest.approx(1.0)
+    held = episode.join(new, q_now, 2.0, world, {"right": door})  # only where the right hand holds the door
+    assert held.meta["replan_join_time_s"] > 1.0
+    assert episode.holds_at(events, held.meta["replan_join_time_s"]) == {"right": door}
+    with pytest.raises(RetargetError, match="never hold what they hold now"):
+        episode.join(new, q_now, 2.0, world, {"left": door})  # the re-plan opens with the other hand

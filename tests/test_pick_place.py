@@ -93,6 +93,8 @@ def test_variants_hold_the_scripted_scenarios() -> None:
         DemoTask("x", "kitchen", (0.0, 0.0, 0.9), click=(1.0, 0.0, 1.0), object_name="can1")
     with pytest.raises(ConfigError, match="hand"):
         DemoTask("x", "kitchen", (0.0, 0.0, 0.9), object_name="can1", hand="third")
+    with pytest.raises(ConfigError, match="door_hand must be '', left or right, got 'both'"):
+        DemoTask("x", "kitchen", (0.0, 0.0, 0.9), object_name="can1", door_hand="both")
     with pytest.raises(ConfigError, match="finite"):
         DemoTask("x", "kitchen", (0.0, float("nan"), 0.9), object_name="can1")
 

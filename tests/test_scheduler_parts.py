@@ -269,6 +269,22 @@ def test_candidate_assignments() -> None:
         candidate_assignments(HandState(), False, False, preferred="up")
 
 
+def test_candidate_assignments_with_the_door_hand_given() -> None:
+    right_opens = candidate_assignments(HandState(), both=False, has_part=True, door="right")
+    assert sorted(a.describe() for a in right_opens) == [
+        "cotemporal: right opens and holds, left grasps, right closes",
+        "sequential: right opens, right grasps, left closes",
+    ]
+    kept = candidate_assignments(HandState(), False, True, preferred="left", door="right")
+    assert [a.describe() for a in kept] == ["cotemporal: right opens and holds, left grasps, right closes"]
+    assert len(candidate_assignments(HandState(), False, False, door="right")) == 2  # nothing to open
+    why = r"left hand cannot open the door/drawer with any grasping hand \(left holds 'mug1'\)"
+    with pytest.raises(PlanningError, match=why):
+        candidate_assignments(HandState(left="mug1"), both=False, has_part=True, door="left")
+    with pytest.raises(ConfigError, match="door_hand='both'"):
+        candidate_assignments(HandState(), False, True, door="both")
+
+
 def test_hand_state_parse() -> None:
     assert HandState.parse(["left:mug1"]) == HandState(left="mug1")
     for bad in (["mug1"], ["middle:mug1"], ["left:"], ["left:a", "left:b"]):

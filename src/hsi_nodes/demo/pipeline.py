@@ -271,7 +271,12 @@ def resolve_task(task: DemoTask, world: SceneWorld, config: SchedulerConfig) -> 
             f"task {task.name}: the place click is on {spot.object_name!r}, not a free surface"
         )
     return Task(
-        target=target, place=spot.position, place_support=spot.support, hand=task.hand, task_id=task.name
+        target=target,
+        place=spot.position,
+        place_support=spot.support,
+        hand=task.hand,
+        door_hand=task.door_hand,
+        task_id=task.name,
     )
 
 

@@ -42,6 +42,8 @@ class DemoTask:
     click: Point | None = None  #: clicked point on the object to pick [m]; None: ``object_name``
     object_name: str = ""  #: object picked by name (hidden from the cameras) [-]
     hand: str = ""  #: grasping hand ``left``/``right``/``both``; '' = the scheduler decides [-]
+    #: hand that opens the target's door or drawer ``left``/``right``; '' = the scheduler decides [-]
+    door_hand: str = ""
     description: str = ""  #: one line for the report [-]
 
     def __post_init__(self) -> None:
@@ -49,6 +51,10 @@ class DemoTask:
             raise ConfigError(f"DemoTask.name must be a non-empty identifier, got {self.name!r}")
         if self.hand not in ("", "left", "right", "both"):
             raise ConfigError(f"task {self.name!r}: hand must be '', left, right or both, got {self.hand!r}")
+        if self.door_hand not in ("", "left", "right"):
+            raise ConfigError(
+                f"task {self.name!r}: door_hand must be '', left or right, got {self.door_hand!r}"
+            )
         if (self.click is None) == (not self.object_name):
             raise ConfigError(f"task {self.name!r}: give exactly one of click [m] or object_name")
         points = [self.place_click] + ([self.click] if self.click is not None else [])

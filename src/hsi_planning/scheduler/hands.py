@@ -115,11 +115,13 @@ def needs_both_hands(kind: str, size: tuple[float, ...], mass: float, config: Ha
 
 
 def candidate_assignments(
-    hands: HandState, both: bool, has_part: bool, preferred: str = ""
+    hands: HandState, both: bool, has_part: bool, preferred: str = "", door: str = ""
 ) -> list[Assignment]:
     """Feasible assignments for a target (``both``: needs two hands; ``has_part``: a door/drawer to open).
 
-    ``preferred``: '' (scheduler decides), ``left``, ``right`` or ``both`` restricts the grasping hand.
+    ``preferred``: '' (scheduler decides), ``left``, ``right`` or ``both`` restricts the grasping hand;
+    ``door``: '' (scheduler decides), ``left`` or ``right`` restricts the hand that opens the door/drawer
+    (ignored without one), e.g. to re-plan the way an executed plan already opened it.
 
     Raises:
         PlanningError: not enough free hands (the message says which hand holds what).
@@ -149,6 +151,15 @@ def candidate_assignments(
         if not out:
             raise PlanningError(
                 f"the {preferred} hand cannot grasp this target ({held or 'both hands free'})"
+            )
+    if door not in ("", "left", "right"):
+        raise ConfigError(f"door_hand={door!r} is not valid; choose left, right or ''")
+    if door and has_part:
+        out = [a for a in out if a.door == door]
+        if not out:
+            grasp = f"the {preferred} hand grasping" if preferred else "any grasping hand"
+            raise PlanningError(
+                f"the {door} hand cannot open the door/drawer with {grasp} ({held or 'both hands free'})"
             )
     return out
 

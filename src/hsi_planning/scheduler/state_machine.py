@@ -72,6 +72,8 @@ class Task:
         place_support: support name of the placement ('' = found from ``place``).
         hands: what the hands hold at the start.
         hand: '' (the scheduler decides), ``left``, ``right`` or ``both``.
+        door_hand: '' (the scheduler decides), ``left`` or ``right``: the hand that opens the target's
+            door or drawer (ignored when there is none).
         task_id: echoed in the schedule.
     """
 
@@ -80,6 +82,7 @@ class Task:
     place_support: str = ""
     hands: HandState = field(default_factory=HandState)
     hand: str = ""
+    door_hand: str = ""
     task_id: str = ""
 
     def __post_init__(self) -> None:
@@ -129,7 +132,7 @@ class Scheduler:
         both = needs_both_hands(
             spec_obj.kind, world.object_size(task.target), object_mass(spec_obj), cfg.hands
         )
-        options = candidate_assignments(task.hands, both, part is not None, task.hand)
+        options = candidate_assignments(task.hands, both, part is not None, task.hand, task.door_hand)
         opened = state.with_opened(part, True) if part else state
         probe: Hand = "right" if options[0].grasp == "both" else options[0].grasp  # type: ignore[assignment]
         blockers = find_blockers(world, self.planner, task.target, opened, hand=probe, config=cfg.auxiliary)
