@@ -111,7 +111,8 @@ def test_the_footstep_plan_lands_its_steps_clear_of_the_door() -> None:
 
 
 @pytest.mark.parametrize(
-    "field, value", [("keep_out_clearance", -0.01), ("max_dodge", -0.1), ("dodge_step", 0.0)]
+    "field, value",
+    [("keep_out_clearance", -0.01), ("max_dodge", -0.1), ("dodge_step", 0.0), ("max_step_yaw", 0.0)],
 )
 def test_bad_foot_clearance_settings_are_refused(field: str, value: float) -> None:
     with pytest.raises(ConfigError, match=field):

@@ -4,6 +4,7 @@ humanoid feet and centre of mass, Jacobians against finite differences."""
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import Any
 
 import numpy as np
@@ -284,6 +285,31 @@ def test_footsteps_shift_the_weight_and_crouch_smoothly(robots: dict[str, RobotM
     u = 0.99999999  # the min-jerk polynomial rounds past 1 here: a swing's slerp must not see that
     assert 10 * u**3 - 15 * u**4 + 6 * u**5 > 1.0
     np.testing.assert_allclose(_swing(np.eye(4), np.eye(4), u, 0.05), np.eye(4), atol=1e-6)
+
+
+def test_footsteps_turn_around_in_steps_the_hips_can_take(robots: dict[str, RobotModel]) -> None:
+    from hsi_retarget.humanoid_ik import _yaw, plan_footsteps
+
+    robot, cfg = robots["humanoid"], SupportConfig()
+    t = np.arange(0.0, 8.0, 1.0 / 60.0)
+    pelvis = _walking_pelvis(robot, np.zeros(t.shape[0]))
+    heading = math.pi * np.clip((t - 0.5) / 1.5, 0.0, 1.0) * 0.999  # turns around on the spot in 1.5 s
+    pelvis[:, 0, 0] = pelvis[:, 1, 1] = np.cos(heading)
+    pelvis[:, 1, 0], pelvis[:, 0, 1] = np.sin(heading), -np.sin(heading)
+
+    def spread(feet: dict[str, np.ndarray]) -> np.ndarray:  # (T,) [rad] heading of one sole from the other
+        rel = np.array([_yaw(a) - _yaw(b) for a, b in zip(feet["left"], feet["right"], strict=True)])
+        return np.abs((rel + math.pi) % (2.0 * math.pi) - math.pi)
+
+    steps = plan_footsteps(robot, t, pelvis, cfg)
+    assert spread(steps.feet).max() <= cfg.max_step_yaw + 1e-9
+    for side in ("left", "right"):  # facing the new way in the end
+        end = _yaw(steps.feet[side][-1]) - heading[-1]
+        assert abs((end + math.pi) % (2.0 * math.pi) - math.pi) <= cfg.yaw_threshold
+    # without the limit one step turned a foot by ~ 150 deg: more than the hips' yaw range (+-0.7 rad) allows
+    free = plan_footsteps(robot, t, pelvis, SupportConfig(max_step_yaw=4.0))
+    assert spread(free.feet).max() > 1.4
+    assert len(free.steps) < len(steps.steps)
 
 
 def test_footsteps_keep_up_with_a_walking_pelvis(robots: dict[str, RobotModel]) -> None:

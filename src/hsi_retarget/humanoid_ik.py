@@ -8,7 +8,9 @@ re-planted feet when the pelvis goal walks away from them.
 - :func:`plan_footsteps`: there is no walking controller. Feet stay planted while the pelvis goal
   ``lookahead`` ahead stays within ``step_threshold`` of its nominal stance; beyond it, a step sequence
   re-plants the feet one at a time (weight shift over the stance foot, then a min-jerk swing with a
-  ``swing_height`` arc). In MuJoCo the pelvis is held on the planned root path by the model's
+  ``swing_height`` arc). A step turns its foot at most ``max_step_yaw`` away from the stance foot's heading
+  (the hips' yaw range: the pelvis stands between both feet), so a sharp turn takes more steps. In MuJoCo
+  the pelvis is held on the planned root path by the model's
   ``pelvis_anchor`` mocap weld.
 """
 
@@ -51,6 +53,10 @@ class SupportConfig:
     lookahead: float = 1.1
     yaw_threshold: float = 0.35  #: [rad] stance heading change that triggers a step
     max_step_length: float = 0.45  #: [m] longest single step
+    #: [rad] largest heading of a stepped foot relative to the stance foot: the pelvis turns between the
+    #: feet on the hip yaw joints (+-0.7 rad on the humanoid); a 90 deg turn in one step left a stance hip
+    #: at its limit and the IK's foot rows infeasible (hands 0.7 m off their goals while turning)
+    max_step_yaw: float = 1.0
     step_crouch: float = 0.07  #: [m] the pelvis goal is lowered this much while stepping (leg reach)
     shift_time: float = 0.2  #: [s] weight shift over the stance foot before a swing
     swing_time: float = 0.35  #: [s] swing duration
@@ -67,7 +73,7 @@ class SupportConfig:
                 raise ConfigError(f"SupportConfig.{name} must be > 0, got {getattr(self, name)}")
         if not self.lookahead >= 0.0:
             raise ConfigError(f"SupportConfig.lookahead must be >= 0 s, got {self.lookahead}")
-        for name in ("max_step_length", "shift_time", "swing_time"):
+        for name in ("max_step_length", "max_step_yaw", "shift_time", "swing_time"):
             if not getattr(self, name) > 0.0:
                 raise ConfigError(f"SupportConfig.{name} must be > 0, got {getattr(self, name)}")
         if not 0.0 <= self.com_margin < min(self.foot_half_length, self.foot_half_width):
@@ -199,6 +205,7 @@ def plan_footsteps(
         for swing in sorted(current, key=lambda s: -disp[s]):
             stance = "right" if swing == "left" else "left"
             reach = _limit_step(current[swing], goal[swing], cfg.max_step_length)
+            reach = _limit_turn(reach, current[stance], cfg)
             target, moved = dodge(reach, keep_out, cfg)
             t_shift, t_end = t0 + cfg.shift_time, t0 + cfg.shift_time + cfg.swing_time
             over = current[stance][:2, 3]
@@ -254,6 +261,17 @@ def _limit_step(start: F64, goal: F64, max_length: float) -> F64:
     out = np.array(goal)
     if length > max_length:
         out[:2, 3] = start[:2, 3] + delta * (max_length / length)
+    return out
+
+
+def _limit_turn(target: F64, stance: F64, config: SupportConfig) -> F64:
+    """``target`` sole (4, 4) turned about its centre to at most ``max_step_yaw`` from the ``stance`` sole's
+    heading."""
+    rel = (_yaw(target) - _yaw(stance) + math.pi) % (2.0 * math.pi) - math.pi
+    if abs(rel) <= config.max_step_yaw:
+        return target
+    out = np.array(target)
+    out[:3, :3] = Rotation.from_euler("z", _yaw(stance) + math.copysign(config.max_step_yaw, rel)).as_matrix()
     return out
 
 
