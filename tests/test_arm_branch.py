@@ -1,7 +1,7 @@
 """Arm configurations for missed grasps: the static search finds one that reaches into a shelf compartment
-where the nominal arm pose gets stuck, the IK's arm task pulls to it, the task's weight profile, the
-missed-contact list, the second tracking resumed where the arm task starts, its escalation while a grasp
-still misses, and config validation."""
+where the nominal arm pose gets stuck, a humanoid's search from its tracked stance keeps its footholds, the
+IK's arm task pulls to it, the task's weight profile, the missed-contact list, the second tracking resumed
+where the arm task starts, its escalation while a grasp still misses, and config validation."""
 
 from __future__ import annotations
 
@@ -89,6 +89,53 @@ def test_a_seeded_configuration_reaches_into_the_shelf_where_the_nominal_pose_st
     again = find_branches(goals, robot, solver, missed, lambda i: targets, config=search)
     np.testing.assert_array_equal(again[0].q, b.q)  # seeded: the same search, the same answer
     np.testing.assert_allclose(b.weight, search.weight * _profile(goals.t, 2.0, search))
+
+
+def test_a_floating_base_searches_from_the_tracked_stance_on_its_footholds() -> None:
+    """The humanoid's solves start from the configuration ``start_at`` gives (crouched here, as the first
+    tracking had it) with the arm at its nominal pose, and keep the soles where the targets put them."""
+    human = RobotModel("humanoid")
+    solver = IKSolver(human)
+    start = np.array(human.q_home)
+    start[2] -= 0.05  # the first tracking's pelvis, 5 cm lower than the nominal one
+    feet = human.fk(start, ("left_sole", "right_sole"))
+    tcp = human.fk(start, (human.tcp_frames["left"],))[human.tcp_frames["left"]].copy()
+    tcp[:3, 3] += [0.15, 0.05, 0.1]
+    pelvis = np.eye(4)
+    pelvis[:3, 3] = human.q_home[:3]
+    n = 5
+    one = np.ones(n, dtype=bool)
+    goals = RobotGoals(
+        t=np.linspace(0.0, 2.0, n),
+        tcp={"left": np.repeat(tcp[None], n, 0)},
+        active={"left": one},
+        reachable={"left": one},
+        reach_excess={"left": np.zeros(n)},
+        root=np.repeat(pelvis[None], n, 0),
+        lift=np.full(n, np.nan),
+        shoulder={"left": np.zeros((n, 3))},
+        scale=1.0,
+        contact={"left": np.ones(n)},
+    )
+    soles = {"left": feet["left_sole"], "right": feet["right_sole"]}
+    targets = IKTargets(tcp={"left": tcp}, root=pelvis, feet=soles, contact={"left": 1.0})
+    asked: list[int] = []
+
+    def start_at(i: int) -> np.ndarray:
+        asked.append(i)
+        return start
+
+    missed = [Missed("left", 4, 2.0, 0.1, "mug1")]
+    config = ArmBranchConfig(seeds=2)
+    branches = find_branches(
+        goals, human, solver, missed, lambda i: targets, config=config, start_at=start_at
+    )
+    assert asked == [4] and len(branches) == 1 and branches[0].error <= config.tolerance
+    q = branches[0].q
+    reached = human.fk(q, ("left_sole", "right_sole"))
+    for side in ("left", "right"):
+        np.testing.assert_allclose(reached[f"{side}_sole"], soles[side], atol=2e-3)
+    assert human.within_limits(q)
 
 
 def test_no_branch_for_a_goal_out_of_reach(robot: RobotModel) -> None:

@@ -11,7 +11,9 @@ joint-space task on that arm (:attr:`~hsi_retarget.ik.IKTargets.arm`) at full we
 before the contact to ``hold_s`` after it, eased in over ``lead_s`` before and out over ``release_s``
 after. :func:`~hsi_retarget.retarget.retarget` then tracks the goals again with these tasks, and again
 with the weights scaled by each ``escalation`` factor while a contact still misses (:func:`scaled`).
-Fixed-base robots only (a humanoid's stance comes from its footstep plan).
+On a floating base (the humanoid) the solves start from the first tracking's configuration at the contact
+(its pelvis, waist and legs on that frame's footholds, ``start_at``) and keep the feet where the footstep
+plan has them.
 """
 
 from __future__ import annotations
@@ -133,10 +135,13 @@ def find_branches(
     targets_at: Callable[[int], IKTargets],
     *,
     config: ArmBranchConfig | None = None,
+    start_at: Callable[[int], F64] | None = None,
 ) -> list[ArmBranch]:
     """An :class:`ArmBranch` for each of ``missed`` that some static solve reaches (see the module
     docstring). ``targets_at(i)``: the IK goals of frame ``i``, called before its solves (it may also set
-    the solver's scene of that frame, e.g. an opened part)."""
+    the solver's scene of that frame, e.g. an opened part). ``start_at(i)``: the (nq,) configuration the
+    solves of frame ``i`` start from, their arm joints set to the nominal pose's or drawn (default: the
+    nominal configuration at the root and lift goals)."""
     cfg = config or ArmBranchConfig()
     rng = np.random.default_rng(cfg.seed)
     out = []
@@ -145,6 +150,9 @@ def find_branches(
         iq = robot.arm_q_indices(m.side)
         lo, hi = np.maximum(robot.q_lower[iq], -math.pi), np.minimum(robot.q_upper[iq], math.pi)
         start = nominal_configuration(robot, goals.root[m.index], float(goals.lift[m.index]))
+        if start_at is not None:
+            start = np.array(start_at(m.index), dtype=np.float64)
+            start[iq] = nominal_configuration(robot, goals.root[m.index], float(goals.lift[m.index]))[iq]
         best: tuple[float, F64, float] | None = None
         for k in range(cfg.seeds + 1):
             q0 = start.copy()

@@ -4,8 +4,8 @@ robot :class:`~hsi_retarget.joint_trajectory.JointTrajectory`.
 Pipeline: source -> :class:`~hsi_retarget.mapping.HumanMotion` (:mod:`hsi_retarget.sources`) -> robot goals
 (:func:`~hsi_retarget.mapping.map_to_robot`; unreachable goals flagged) -> per-frame differential IK
 (:mod:`hsi_retarget.tracking`, :class:`~hsi_retarget.ik.IKSolver`; the humanoid's feet from
-:func:`~hsi_retarget.humanoid_ik.plan_footsteps`; a fixed-base robot's grasps the IK missed tracked again
-towards arm configurations that reach them, :mod:`hsi_retarget.arm_branch`) -> time-parameterization
+:func:`~hsi_retarget.humanoid_ik.plan_footsteps`; grasps the IK missed tracked again towards arm
+configurations that reach them, :mod:`hsi_retarget.arm_branch`) -> time-parameterization
 (:func:`~hsi_retarget.timing.time_parameterize`; stretched segments reported). The first frame is solved
 to convergence from the nominal pose; every later frame takes up to ``iterations_per_frame`` steps from the
 previous solution, within ``velocity_factor`` times the joint velocity limits over the source frame period
@@ -96,9 +96,9 @@ class RetargetConfig:
     #: top-down grasp turns about its approach axis where the fingers have room
     #: (:mod:`hsi_retarget.finger_room`); ``None``: fully open, as planned.
     room: FingerRoomConfig | None = field(default_factory=FingerRoomConfig)
-    #: Fixed-base robots: grasps and releases the IK missed are solved again from other arm configurations,
-    #: and the goals tracked again pulled towards one that reaches (:mod:`hsi_retarget.arm_branch`);
-    #: ``None``: off.
+    #: Grasps and releases the IK missed are solved again from other arm configurations (a floating base
+    #: on its footholds), and the goals tracked again pulled towards one that reaches
+    #: (:mod:`hsi_retarget.arm_branch`); ``None``: off.
     arm_branch: ArmBranchConfig | None = field(default_factory=ArmBranchConfig)
     #: Carries re-aimed from the TCP pose reached at their grasp, and onto each object's placement from a
     #: schedule's record of it (:mod:`hsi_retarget.carry_correction`) [-].
@@ -262,7 +262,7 @@ def retarget(
         goals, placed = place_carries(goals, motion.events, carry_records)
     t1 = time.perf_counter()
     carried = motion.events if cfg.correct_carry else ()  # re-aimed from the reached grasp poses
-    retrack = not model.floating and bool(windows)
+    retrack = bool(windows)
     objects = _object_meshes(scene, motion) if cfg.hold_objects else None
     qs, pos_track, _, diag = track(
         goals, model, solver, cfg, part=part, events=carried, trace=retrack, objects=objects

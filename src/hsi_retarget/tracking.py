@@ -350,13 +350,25 @@ def retrack_missed(
     started, n = time.perf_counter(), goals.t.shape[0]
 
     aimed = diag.get("goals", goals)  # as the first pass re-aimed them (carries, the part's contents)
+    # a floating base stands where the first pass had it, on the same footholds (the plan `track` makes)
+    feet = None
+    if robot.floating:
+        feet = plan_footsteps(robot, goals.t, goals.root, cfg.support, part_sweep(part))
 
     def targets_at(i: int) -> IKTargets:  # the opened part as the first pass had it at frame i
         scene, holder = (None, "") if posed is None else posed.at(float(goals.t[i]))
         solver.set_part_scene(scene, holder)
-        return frame_targets(aimed, i, holder=holder)
+        return frame_targets(aimed, i, feet, holder=holder)
 
-    branches = find_branches(goals, robot, solver, missed, targets_at, config=branch_cfg)
+    branches = find_branches(
+        goals,
+        robot,
+        solver,
+        missed,
+        targets_at,
+        config=branch_cfg,
+        start_at=(lambda i: qs[i]) if robot.floating else None,
+    )
     solver.set_part_scene(None)
     contacts = missed_contacts(goals.t, windows, pos_err, 0.0)  # every free contact, with its error
     report: dict[str, Any] = {
