@@ -149,10 +149,9 @@ def find_branches(
         targets = targets_at(m.index)
         iq = robot.arm_q_indices(m.side)
         lo, hi = np.maximum(robot.q_lower[iq], -math.pi), np.minimum(robot.q_upper[iq], math.pi)
-        start = nominal_configuration(robot, goals.root[m.index], float(goals.lift[m.index]))
-        if start_at is not None:
-            start = np.array(start_at(m.index), dtype=np.float64)
-            start[iq] = nominal_configuration(robot, goals.root[m.index], float(goals.lift[m.index]))[iq]
+        nominal = nominal_configuration(robot, goals.root[m.index], float(goals.lift[m.index]))
+        start = nominal if start_at is None else np.array(start_at(m.index), dtype=np.float64)
+        start[iq] = nominal[iq]  # the arm from its nominal pose
         best: tuple[float, F64, float] | None = None
         for k in range(cfg.seeds + 1):
             q0 = start.copy()

@@ -60,6 +60,7 @@ class Trace:
     versions: list[tuple[int, RobotGoals, list[dict[str, Any]]]]
     #: (frame, part) where the opened part was posed as the holder reached it (None: not posed)
     posed: tuple[int, PartPhase] | None = None
+    feet: Footsteps | None = None  #: the floating base's footstep plan (the same for a second pass)
 
 
 def frame_targets(
@@ -123,11 +124,8 @@ def track(
     frame its grasp was reached (within ``cfg.held_reach``) until its release
     (:mod:`hsi_retarget.held_object`; ``diag["held"]`` lists them)."""
     n = goals.t.shape[0]
-    feet = (
-        plan_footsteps(robot, goals.t, goals.root, cfg.support, keep_out=part_sweep(part))
-        if robot.floating
-        else None
-    )
+    planned = resume[1].feet if resume is not None else None
+    feet = planned if planned is not None else _footsteps(robot, goals, cfg, part)
     q = nominal_configuration(robot, goals.root[0], float(goals.lift[0]))
     qs = np.zeros((n, robot.nq))
     carries, corrections = carry_frames(goals.t, events), []
@@ -242,8 +240,18 @@ def track(
     if events:
         diag["goals"], diag["carry_corrections"] = goals, corrections
     if trace:
-        diag["trace"] = Trace(qs, pos_err, ori_err, fallbacks_to, clear_to, versions, posed)
+        diag["trace"] = Trace(qs, pos_err, ori_err, fallbacks_to, clear_to, versions, posed, feet)
     return qs, pos_err, ori_err, diag
+
+
+def _footsteps(
+    robot: RobotModel, goals: RobotGoals, cfg: RetargetConfig, part: PartPhase | None
+) -> Footsteps | None:
+    """A floating base's footstep plan under the pelvis goals, clear of ``part``'s sweep (``None`` for a
+    fixed base)."""
+    if not robot.floating:
+        return None
+    return plan_footsteps(robot, goals.t, goals.root, cfg.support, keep_out=part_sweep(part))
 
 
 def _holds(t: F64, carries: Mapping[int, Sequence[ContactEvent]]) -> list[tuple[int, int, str, str]]:
@@ -350,10 +358,8 @@ def retrack_missed(
     started, n = time.perf_counter(), goals.t.shape[0]
 
     aimed = diag.get("goals", goals)  # as the first pass re-aimed them (carries, the part's contents)
-    # a floating base stands where the first pass had it, on the same footholds (the plan `track` makes)
-    feet = None
-    if robot.floating:
-        feet = plan_footsteps(robot, goals.t, goals.root, cfg.support, part_sweep(part))
+    # a floating base stands where the first pass had it, on the same footholds
+    feet = trace.feet if isinstance(trace, Trace) else _footsteps(robot, goals, cfg, part)
 
     def targets_at(i: int) -> IKTargets:  # the opened part as the first pass had it at frame i
         scene, holder = (None, "") if posed is None else posed.at(float(goals.t[i]))
