@@ -164,6 +164,11 @@ def test_a_static_solve_stops_once_its_error_stalls(robot: RobotModel) -> None:
     near[:3, 3] = [0.45, -0.3, 0.95]
     reach = IKTargets(tcp={"right": near}, root=_ROOT, lift=_LIFT, contact={"right": 1.0})
     assert solver.solve(start, reach, 200, stall=(20, 1e-3)).position_error["right"] < 1e-3
+    # giving up once the error, falling at its recent rate, cannot get within 1 cm by the step limit
+    hopeless = solver.solve(start, stuck, 200, stall=(20, 1e-4), give_up=0.01)
+    assert hopeless.iterations < solver.solve(start, stuck, 200, stall=(20, 1e-4)).iterations
+    assert hopeless.position_error["left"] > 0.1  # far from within 1 cm
+    assert solver.solve(start, reach, 200, stall=(20, 1e-3), give_up=0.01).position_error["right"] < 1e-3
     with pytest.raises(ConfigError, match="stall_steps"):
         ArmBranchConfig(stall_steps=0)
 
@@ -213,6 +218,14 @@ def test_a_second_tracking_resumed_where_the_arm_task_starts_is_the_full_one(rob
         assert resumed[3][key] == full[3][key]
     np.testing.assert_array_equal(resumed[3]["goals"].tcp["right"], full[3]["goals"].tcp["right"])
     assert full[3]["carry_corrections"]  # the carry was re-aimed before frame 50: the resume takes that
+    # stopped after frame 69 and resumed there (the staged search's tries): again the full pass
+    part = track(goals, robot, solver, cfg, events=events, arm=arm, resume=(50, trace), trace=True, stop=70)
+    assert np.isnan(part[1]["right"][70:]).all() and not part[0][70:].any()
+    np.testing.assert_array_equal(part[0][:70], full[0][:70])
+    ended = track(goals, robot, solver, cfg, events=events, arm=arm, resume=(70, part[3]["trace"]))
+    np.testing.assert_array_equal(ended[0], full[0])
+    for key in ("qp_fallbacks", "min_collision_slack_m", "carry_corrections"):
+        assert ended[3][key] == full[3][key]
 
 
 def test_re_tracking_escalates_only_while_a_grasp_still_misses(robot: RobotModel) -> None:

@@ -157,7 +157,8 @@ def find_branches(
             q0 = start.copy()
             if k > 0:
                 q0[iq] = rng.uniform(lo, hi)
-            res = solver.solve(q0, targets, cfg.iterations, stall=(cfg.stall_steps, cfg.stall_progress))
+            stall = (cfg.stall_steps, cfg.stall_progress)
+            res = solver.solve(q0, targets, cfg.iterations, stall=stall, give_up=cfg.tolerance)
             if (
                 res.position_error.get(m.side, math.inf) > cfg.tolerance
                 or res.orientation_error.get(m.side, math.inf) > cfg.orientation_tolerance

@@ -581,17 +581,21 @@ class IKSolver:
         iterations: int | None = None,
         dt: float | None = None,
         stall: tuple[int, float] | None = None,
+        *,
+        give_up: float | None = None,
     ) -> IKResult:
         """Step from ``q0`` until the TCP errors are within tolerance, the steps stall, or ``iterations``.
         ``stall`` = (steps n, progress [m]): also stop once the largest TCP position error is less than
         ``progress`` below what it was n steps before (stuck against a constraint, or close enough); only
-        with TCP goals."""
+        with TCP goals. ``give_up`` [m] (with ``stall``): also stop once that error, falling on at its rate
+        over those n steps, would still be above ``give_up`` at the step limit (it cannot get there)."""
         cfg = self.config
         q = np.array(q0, dtype=np.float64)
         fallbacks, done, it = 0, False, 0
         worst: list[float] = []  # the largest TCP position error after each step
         stall = stall if targets.tcp else None  # without TCP goals there is no error to watch
-        for step in range(1, (iterations or cfg.iterations) + 1):
+        limit = iterations or cfg.iterations
+        for step in range(1, limit + 1):
             it = step
             q_new, info = self.step(q, targets, dt)
             fallbacks += int(info.fallback > 0)
@@ -605,8 +609,12 @@ class IKSolver:
                 break
             if stall is not None:
                 worst.append(max(pos.values()))
-                if len(worst) > stall[0] and worst[-1 - stall[0]] - worst[-1] < stall[1]:
-                    break
+                if len(worst) > stall[0]:
+                    fell = worst[-1 - stall[0]] - worst[-1]  # [m] over the last n steps
+                    if fell < stall[1]:
+                        break
+                    if give_up is not None and worst[-1] - fell / stall[0] * (limit - step) > give_up:
+                        break
         pos, ori = self.errors(q, targets)
         return IKResult(q, pos, ori, it, done, fallbacks)
 

@@ -23,7 +23,7 @@ import pinocchio as pin
 import trimesh
 from numpy.typing import NDArray
 
-from hsi_retarget.arm_branch import ArmBranch, find_branches, missed_contacts, scaled
+from hsi_retarget.arm_branch import ArmBranch, Missed, find_branches, missed_contacts, scaled
 from hsi_retarget.carry_correction import carry_frames, correct_carry
 from hsi_retarget.foot_clearance import part_sweep
 from hsi_retarget.grasp_windows import GraspWindow
@@ -107,6 +107,7 @@ def track(
     trace: bool = False,
     resume: tuple[int, Trace] | None = None,
     objects: Mapping[str, trimesh.Trimesh] | None = None,
+    stop: int | None = None,
 ) -> tuple[F64, dict[str, F64], dict[str, F64], dict[str, Any]]:
     """Frame-by-frame IK of ``goals``: configurations (T, nq), TCP position [m] and orientation [rad] errors
     per side (T,) (NaN where inactive) and diagnostics (fallbacks, clearance, footsteps; with ``events``
@@ -122,7 +123,8 @@ def track(
     from it (the targets there are the same) and tracks on from k. ``objects``: name -> world mesh at rest
     of the free objects; with ``events``, each one grasped is collision geometry of its hand from the
     frame its grasp was reached (within ``cfg.held_reach``) until its release
-    (:mod:`hsi_retarget.held_object`; ``diag["held"]`` lists them)."""
+    (:mod:`hsi_retarget.held_object`; ``diag["held"]`` lists them). ``stop``: track only the frames before
+    it (the later rows stay zero, their errors NaN; with ``trace`` a later call can ``resume`` from it)."""
     n = goals.t.shape[0]
     planned = resume[1].feet if resume is not None else None
     feet = planned if planned is not None else _footsteps(robot, goals, cfg, part)
@@ -166,7 +168,7 @@ def track(
             {s: float(old.pos_err[s][start - 1]) for s in was},
             {s: float(old.ori_err[s][start - 1]) for s in was},
         )
-    for i in range(start, n):
+    for i in range(start, n if stop is None else min(max(stop, start), n)):
         if cfg.reached_part and part is not None and posed is None and i > 0 and goals.t[i] >= part.t_open:
             part = _reached(part, goals.t, qs, i, robot)
             posed = (i, part)
@@ -355,7 +357,7 @@ def retrack_missed(
     missed = [] if branch_cfg is None else missed_contacts(goals.t, windows, pos_err, branch_cfg.trigger)
     if branch_cfg is None or not missed:
         return qs, diag
-    started, n = time.perf_counter(), goals.t.shape[0]
+    started = time.perf_counter()
 
     aimed = diag.get("goals", goals)  # as the first pass re-aimed them (carries, the part's contents)
     # a floating base stands where the first pass had it, on the same footholds
@@ -387,26 +389,20 @@ def retrack_missed(
         "contact_error_before_m": sum(m.error for m in contacts),
     }
     if branches:
-        # the targets differ from the first frame that an arm task weighs on: track on from there
-        start = min(int(np.argmax(b.weight > 0.0)) if (b.weight > 0.0).any() else n for b in branches)
-        resume = (start, trace) if isinstance(trace, Trace) and start < n else None
-        best = (math.inf, qs, diag)
-        report["factors_tried"] = []
-        for factor in (1.0, *branch_cfg.escalation):  # harder pulls only while a contact still misses
-            arm = scaled(branches, factor)
-            qs2, pos2, _, diag2 = track(
-                goals, robot, solver, cfg, part=part, events=events, arm=arm, resume=resume, objects=objects
-            )
-            after = sum(float(np.nan_to_num(pos2[m.side][m.index], nan=m.error)) for m in contacts)
-            report["factors_tried"].append(factor)
-            if after < best[0]:
-                best, report["factor"] = (after, qs2, diag2), factor
-            if all(pos2[m.side][m.index] <= branch_cfg.trigger for m in missed):
-                break
-        report["contact_error_after_m"] = best[0]
-        report["kept"] = best[0] < report["contact_error_before_m"]
-        if report["kept"]:
-            qs, diag = best[1], best[2]
+        qs, diag = _retrack(
+            goals,
+            robot,
+            solver,
+            cfg,
+            (qs, diag, trace),
+            branches=branches,
+            missed=missed,
+            contacts=contacts,
+            report=report,
+            part=part,
+            events=events,
+            objects=objects,
+        )
     report["time_s"] = time.perf_counter() - started
     _LOG.info(
         "arm branches: %d of %d missed contacts reached by a static solve; tracked again: %s",
@@ -416,6 +412,61 @@ def retrack_missed(
     )
     diag["arm_branches"] = report
     return qs, diag
+
+
+def _retrack(
+    goals: RobotGoals,
+    robot: RobotModel,
+    solver: IKSolver,
+    cfg: RetargetConfig,
+    first: tuple[F64, dict[str, Any], Trace | None],
+    *,
+    branches: Sequence[ArmBranch],
+    missed: Sequence[Missed],
+    contacts: Sequence[Missed],
+    report: dict[str, Any],
+    **kwargs: Any,
+) -> tuple[F64, dict[str, Any]]:
+    """The ``first`` tracking (configurations, diagnostics, trace) or ``goals`` tracked again with the
+    ``branches``' arm tasks, scaled by 1 and then each escalation factor while a ``missed`` contact still
+    misses: each try up to the last missed contact only, the one missing least there tracked on to the end
+    and kept when it misses less than the first over all ``contacts`` (``report`` filled in). ``kwargs``:
+    ``part``, ``events``, ``objects`` of :func:`track`."""
+    qs, diag, trace = first
+    n, escalation = goals.t.shape[0], cfg.arm_branch.escalation if cfg.arm_branch else ()
+    trigger = cfg.arm_branch.trigger if cfg.arm_branch else 0.0
+    # the targets differ from the first frame that an arm task weighs on: track on from there
+    start = min(int(np.argmax(b.weight > 0.0)) if (b.weight > 0.0).any() else n for b in branches)
+    resume = (start, trace) if isinstance(trace, Trace) and start < n else None
+    stop = max(m.index for m in missed) + 1  # the tries are compared up to here
+    early = [m for m in contacts if m.index < stop]
+
+    def miss(errors: dict[str, F64], among: Sequence[Missed]) -> float:
+        return sum(float(np.nan_to_num(errors[m.side][m.index], nan=m.error)) for m in among)
+
+    best: tuple[float, float, list[ArmBranch], dict[str, Any]] | None = None
+    report["factors_tried"] = []
+    for factor in (1.0, *escalation):  # harder pulls only while a contact still misses
+        arm = scaled(branches, factor)
+        _, pos2, _, diag2 = track(
+            goals, robot, solver, cfg, arm=arm, resume=resume, trace=True, stop=stop, **kwargs
+        )
+        report["factors_tried"].append(factor)
+        if best is None or miss(pos2, early) < best[0]:
+            best = (miss(pos2, early), factor, arm, diag2)
+        if all(pos2[m.side][m.index] <= trigger for m in missed):
+            break
+    assert best is not None  # at least factor 1 was tried
+    report["factor"] = best[1]
+    if best[0] >= sum(m.error for m in early):  # no try gets nearer there: the rest is not tracked
+        report["contact_error_after_m"] = None  # not tracked to the end
+        return qs, diag
+    qs2, pos2, _, diag2 = track(
+        goals, robot, solver, cfg, arm=best[2], resume=(stop, best[3]["trace"]), **kwargs
+    )
+    report["contact_error_after_m"] = after = miss(pos2, contacts)
+    report["kept"] = after < report["contact_error_before_m"]
+    return (qs2, diag2) if report["kept"] else (qs, diag)
 
 
 def tcp_errors(robot: RobotModel, goals: RobotGoals, qs: F64) -> tuple[dict[str, F64], dict[str, F64]]:
