@@ -55,6 +55,55 @@ def test_lower_bound_never_exceeds_the_distance(kitchen: SceneDistance) -> None:
 
 
 @pytest.mark.parametrize("name", ["dual_ur5e", "humanoid"])
+def test_collision_rows_are_the_gap_rates_by_finite_differences(name: str, kitchen: SceneDistance) -> None:
+    """Each row n^T (J_a - J_b) is the rate at which its pair's centre distance along n (or a sphere's
+    distance to the scene along its gradient) changes with the joint velocities: central differences over
+    every velocity of the robot, its floating base included."""
+    robot = RobotModel(name)
+    solver = IKSolver(robot, scene=kitchen)
+    spheres, pairs = solver.spheres, solver._pairs
+    rng = np.random.default_rng(11)
+    checked = 0
+    for _ in range(6):
+        q = np.clip(robot.random_configuration(rng, root_box=0.2), robot.q_lower, robot.q_upper)
+        data = robot.model.createData()
+        pin.computeJointJacobians(robot.model, data, q)
+        pin.updateFramePlacements(robot.model, data)
+        kwargs = {"margins": (0.02, 0.005, 0.015), "gain": 0.5, "max_rows": 40}
+        rows, _, _ = collision_rows(robot.model, data, spheres, pairs, kitchen, activation=5.0, **kwargs)  # type: ignore[arg-type]
+        centers = spheres.world(data)
+        ia, ib, gaps, dirs = find_candidates(
+            spheres,
+            centers,
+            pairs,
+            [(kitchen, spheres.everyone)],
+            spheres.grounded,
+            margins=(0.02, 0.005, 0.015),
+            activation=5.0,
+            bounds=None,
+            links=None,
+        )
+        order = np.argsort(gaps)[:40]  # the rows' candidates, closest first
+        ia, ib, dirs = ia[order], ib[order], dirs[order]
+        eps = 1e-6
+        numeric = np.zeros_like(rows)
+        for k in range(robot.nv):
+            dq = np.zeros(robot.nv)
+            dq[k] = eps
+            ends = []
+            for sign in (1.0, -1.0):
+                d = robot.model.createData()
+                pin.framesForwardKinematics(robot.model, d, robot.integrate(q, sign * dq))
+                c = spheres.world(d)
+                other = np.where(ib[:, None] >= 0, c[np.maximum(ib, 0)], 0.0)
+                ends.append(np.einsum("kj,kj->k", dirs, c[ia] - other))
+            numeric[:, k] = (ends[0] - ends[1]) / (2 * eps)
+        np.testing.assert_allclose(rows, numeric, atol=1e-6)
+        checked += int(rows.any(axis=1).sum())
+    assert checked > 100  # scene and pair rows, most of them moving
+
+
+@pytest.mark.parametrize("name", ["dual_ur5e", "humanoid"])
 def test_culled_rows_and_clearance_equal_the_full_check(name: str, kitchen: SceneDistance) -> None:
     robot = RobotModel(name)
     config = IKConfig()

@@ -80,6 +80,24 @@ class SphereSet:
         mask.flags.writeable = False
         return np.asarray(mask)
 
+    @functools.cached_property
+    def _supports(self) -> dict[int, NDArray[np.bool_]]:
+        return {}
+
+    def support(self, model: pin.Model) -> NDArray[np.bool_]:
+        """(S, nv) True where a velocity of ``model`` (the model the spheres were made for) moves the
+        sphere: the joints from the root to its link's joint (computed once per model)."""
+        key = id(model)
+        if key not in self._supports:
+            mask = np.zeros((self.radii.shape[0], model.nv), dtype=bool)
+            for s, fid in enumerate(self.frame_ids.tolist()):
+                for j in model.supports[model.frames[fid].parentJoint]:
+                    if j > 0:
+                        mask[s, model.idx_vs[j] : model.idx_vs[j] + model.nvs[j]] = True
+            mask.flags.writeable = False
+            self._supports[key] = mask
+        return self._supports[key]
+
     def of(self, group: str) -> I64:
         """Indices of the spheres of ``group`` (``left``, ``right`` or ``body``)."""
         return np.flatnonzero(self.groups == GROUPS.index(group)).astype(np.int64)
@@ -383,24 +401,21 @@ def scene_layers(
 def _point_rows(
     model: pin.Model, data: pin.Data, spheres: SphereSet, centers: F64, *, idx: I64, dirs: F64
 ) -> F64:
-    """Rows (k, nv): ``dirs[k]`` (3,) times the point Jacobian of sphere ``idx[k]`` (zero where -1)."""
+    """Rows (k, nv): ``dirs[k]`` (3,) times the point Jacobian of sphere ``idx[k]`` (zero where -1), from the
+    joint Jacobians in ``data.J`` (world frame: the velocity of the point at the origin v and the angular
+    velocity w per column): ``d . (v + w x p) = d . v + (p x d) . w`` on the joints that move the sphere."""
     rows = np.zeros((idx.shape[0], model.nv))
     used = idx >= 0
     if not used.any():
         return rows
-    frame = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
-    seen: dict[int, int] = {}  # frame -> its index among the frames read (each Jacobian is read once)
-    inverse = [seen.setdefault(f, len(seen)) for f in spheres.frame_ids[idx[used]].tolist()]
-    jac = np.array([pin.getFrameJacobian(model, data, f, frame) for f in seen])[inverse]
-    origin = np.array([data.oMf[f].translation for f in seen])[inverse]
-    d = dirs[used]
-    r = centers[idx[used]] - origin
-    lever = np.column_stack(  # d x r (np.cross's formula, without its overhead): d . (w x r) = -(d x r) . w
+    jac = data.J
+    d, p = dirs[used], centers[idx[used]]
+    lever = np.column_stack(  # p x d (np.cross's formula, without its overhead)
         (
-            d[:, 1] * r[:, 2] - d[:, 2] * r[:, 1],
-            d[:, 2] * r[:, 0] - d[:, 0] * r[:, 2],
-            d[:, 0] * r[:, 1] - d[:, 1] * r[:, 0],
+            p[:, 1] * d[:, 2] - p[:, 2] * d[:, 1],
+            p[:, 2] * d[:, 0] - p[:, 0] * d[:, 2],
+            p[:, 0] * d[:, 1] - p[:, 1] * d[:, 0],
         )
     )
-    rows[used] = np.einsum("kj,kjn->kn", d, jac[:, :3]) - np.einsum("kj,kjn->kn", lever, jac[:, 3:])
+    rows[used] = (d @ jac[:3] + lever @ jac[3:]) * spheres.support(model)[idx[used]]
     return rows

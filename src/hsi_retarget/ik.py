@@ -245,6 +245,9 @@ class IKSolver:
         self._jq = np.array([robot.q_index(n) for n in robot.joint_names], dtype=np.int64)
         self._jv = np.array([robot.v_index(n) for n in robot.joint_names], dtype=np.int64)
         self._posture_w = np.full(robot.nv, self.config.posture_weight)
+        self._w_tcp = np.repeat([cfg.position_weight, cfg.orientation_weight], 3)  #: (6,) TCP task weights
+        #: (6,) TCP weight factors at a contact, minus 1
+        self._contact_gain = np.repeat([cfg.contact_position_factor, cfg.contact_orientation_factor], 3) - 1.0
         free = [j for j in (*BASE_JOINTS, LIFT_JOINT) if j in robot.joint_names]
         self._posture_w[[robot.v_index(j) for j in free]] = 0.0
         if robot.floating:
@@ -265,6 +268,11 @@ class IKSolver:
             if LIFT_JOINT in robot.joint_names
             else None
         )
+        self._base_jac = np.zeros((len(self._base_v), robot.nv))  #: (3, nv) the base x, y, yaw task
+        self._base_jac[np.arange(len(self._base_v)), self._base_v] = 1.0
+        self._lift_jac = np.zeros((1, robot.nv))  #: (1, nv) the torso lift task
+        if self._lift is not None:
+            self._lift_jac[0, self._lift[1]] = 1.0
 
     # ------------------------------------------------------------------------------------- tasks
 
@@ -281,33 +289,26 @@ class IKSolver:
     def _tasks(self, q: F64, targets: IKTargets) -> tuple[F64, F64]:
         """Quadratic objective (H (nv, nv), g (nv,)) of the tasks and the posture."""
         cfg, nv = self.config, self.robot.nv
-        w_tcp = np.array([cfg.position_weight] * 3 + [cfg.orientation_weight] * 3)
-        hess, grad = np.zeros((nv, nv)), np.zeros(nv)
-        stacked: list[F64] = []
-
-        def add(jac: F64, err: F64, w: F64) -> None:
-            wj = jac * w[:, None]
-            hess[:] += jac.T @ wj
-            grad[:] -= wj.T @ err
-            stacked.append(jac)
-
+        jacs: list[F64] = []
+        errs: list[F64] = []
+        weights: list[F64] = []
         for side, goal in targets.tcp.items():
             fid = self._tcp_ids[side]
             c = targets.contact.get(side, 0.0)
-            w = w_tcp
-            if c > 0.0:
-                gain = np.repeat([cfg.contact_position_factor, cfg.contact_orientation_factor], 3)
-                w = w_tcp * (1.0 + c * (gain - 1.0))
+            w = self._w_tcp if c <= 0.0 else self._w_tcp * (1.0 + c * self._contact_gain)
             if side in targets.holding:
                 w = w * cfg.hold_factor
-            add(self._frame_jacobian(fid), self._pose_error(fid, goal), w)
+            jacs.append(self._frame_jacobian(fid))
+            errs.append(self._pose_error(fid, goal))
+            weights.append(w)
         near = max(targets.contact.values(), default=0.0)  # the base moves less for a hand at a contact
         root_weight = cfg.root_weight * (1.0 + near * (cfg.contact_root_factor - 1.0))
         if targets.root is not None and cfg.root_weight > 0.0:
             goal = np.asarray(targets.root)
             if self.robot.floating:
-                w = np.full(6, root_weight)
-                add(self._frame_jacobian(self._pelvis), self._pose_error(self._pelvis, goal), w)
+                jacs.append(self._frame_jacobian(self._pelvis))
+                errs.append(self._pose_error(self._pelvis, goal))
+                weights.append(np.full(6, root_weight))
             elif self._base_v:
                 yaw = math.atan2(goal[1, 0], goal[0, 0])
                 err = np.array([goal[0, 3], goal[1, 3], yaw]) - q[self._base_q]
@@ -315,29 +316,40 @@ class IKSolver:
                 yaw_at, lo, hi = q[self._base_q[2]], self._yaw_range[0], self._yaw_range[1]
                 if not lo <= yaw_at + err[2] <= hi:  # the short way round ends past the yaw limit
                     err[2] -= math.copysign(2.0 * math.pi, err[2])
-                jac = np.zeros((3, nv))
-                jac[[0, 1, 2], self._base_v] = 1.0
-                add(jac, err, np.full(3, root_weight))
+                jacs.append(self._base_jac)
+                errs.append(err)
+                weights.append(np.full(3, root_weight))
         for side, (goal_q, weight) in targets.arm.items():
             if weight > 0.0:
                 iq, iv = self._arm[side]
                 jac = np.zeros((iv.shape[0], nv))
                 jac[np.arange(iv.shape[0]), iv] = 1.0
-                add(jac, np.asarray(goal_q)[iq] - q[iq], np.full(iv.shape[0], weight))
+                jacs.append(jac)
+                errs.append(np.asarray(goal_q)[iq] - q[iq])
+                weights.append(np.full(iv.shape[0], weight))
         if targets.lift is not None and self._lift is not None and cfg.lift_weight > 0.0:
-            jac = np.zeros((1, nv))
-            jac[0, self._lift[1]] = 1.0
-            add(jac, np.array([targets.lift - q[self._lift[0]]]), np.array([cfg.lift_weight]))
+            jacs.append(self._lift_jac)
+            errs.append(np.array([targets.lift - q[self._lift[0]]]))
+            weights.append(np.array([cfg.lift_weight]))
         posture = self.robot.q_home if targets.posture is None else np.asarray(targets.posture)
         diff = self._posture_w * pin.difference(self._model, q, posture)
-        if stacked:  # the posture acts in the null space of the tasks: no steady-state task error
-            jac = np.vstack(stacked)[:, self.act]
+        if jacs:
+            jac = np.vstack(jacs)
+            wj = jac * np.concatenate(weights)[:, None]
+            hess = jac.T @ wj
+            grad = -(wj.T @ np.concatenate(errs))
+            # the posture acts in the null space of the tasks (no steady-state task error): its pull minus the
+            # part in the tasks' row space, spanned by the eigenvectors of J^T J whose eigenvalues pass pinv's
+            # cut-off (singular values above 1e-4 of the largest, squared)
+            ja = jac[:, self.act]
+            eig, vec = np.linalg.eigh(ja.T @ ja)
+            rows = vec[:, eig > 1e-8 * eig[-1]]
             diff_act = diff[self.act]
-            _, sing, vt = np.linalg.svd(jac, full_matrices=False)
-            rows = vt[sing > 1e-4 * sing[0]]  # the tasks' row space (pinv's cut-off): J^+ J x = V V^T x
-            diff[self.act] = diff_act - rows.T @ (rows @ diff_act)
-        hess[np.diag_indices(nv)] += self._posture_w + cfg.damping
+            diff[self.act] = diff_act - rows @ (rows.T @ diff_act)
+        else:
+            hess, grad = np.zeros((nv, nv)), np.zeros(nv)
         grad -= diff
+        hess[np.diag_indices(nv)] += self._posture_w + cfg.damping
         return hess, grad
 
     # -------------------------------------------------------------------------------- collisions

@@ -211,7 +211,7 @@ def track(
             extra = cfg.repair_iterations if info.min_clearance < 0.01 else 0
             if extra and solver.clearance_bound(q_prev, q, info.min_clearance) > -cfg.repair_depth:
                 extra = 0  # the last step cannot have cut that deep: skip the full clearance query
-            while extra > 0 and solver.clearance(q) < -cfg.repair_depth:
+            while extra > 0 and solver.clearance(q, within=0.0) < -cfg.repair_depth:
                 q, info = solver.step(q, targets, dt, q_start)
                 errors = None
                 extra -= 1
