@@ -27,9 +27,10 @@ from hsi_retarget.ik import IKSolver, IKTargets
 from hsi_retarget.joint_trajectory import ContactEvent
 from hsi_retarget.mapping import RobotGoals, nominal_configuration
 from hsi_retarget.retarget import RetargetConfig
+from hsi_retarget.retrack import retrack_missed
 from hsi_retarget.robots import RobotModel
 from hsi_retarget.scene_distance import SceneDistance
-from hsi_retarget.tracking import retrack_missed, track
+from hsi_retarget.tracking import track
 
 # A grasp of can1 deep in a compartment of the narrow shelf (benchmark case narrow_shelf_can/reshape/3 at
 # 8.6 s of its schedule): TCP goals [m], base pose and torso lift [m] as the mapping gave them.

@@ -46,12 +46,13 @@ from hsi_retarget.mapping import (
     map_to_robot,
 )
 from hsi_retarget.part_scene import PartPhase, opened_part
+from hsi_retarget.retrack import retrack_missed
 from hsi_retarget.robots import RobotModel
 from hsi_retarget.scene_distance import SceneDistance
 from hsi_retarget.smoothing import keep_clearance, smooth_joints  # noqa: F401 (smooth_joints: API)
 from hsi_retarget.sources import human_motion_from_schedule, human_motion_from_wrists
 from hsi_retarget.timing import TimingConfig, time_parameterize
-from hsi_retarget.tracking import retrack_missed, tcp_errors, track
+from hsi_retarget.tracking import tcp_errors, track
 
 if TYPE_CHECKING:  # imported lazily: the scheduler package is heavy and not needed for recorded motion
     from hsi_planning.scheduler.schedule import Schedule

@@ -1,6 +1,5 @@
-"""Frame-by-frame IK of robot goals (:func:`track`), and a second pass pulled towards arm configurations
-that reach the grasps and releases the first one missed (:func:`retrack_missed`,
-:mod:`hsi_retarget.arm_branch`).
+"""Frame-by-frame IK of robot goals (:func:`track`); a second pass pulled towards arm configurations that
+reach the grasps and releases the first one missed is :func:`hsi_retarget.retrack.retrack_missed`.
 
 The first frame is solved to convergence from the nominal pose; every later frame takes up to
 ``iterations_per_frame`` steps from the previous solution, within ``velocity_factor`` times the joint
@@ -13,7 +12,6 @@ from __future__ import annotations
 
 import logging
 import math
-import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -23,10 +21,9 @@ import pinocchio as pin
 import trimesh
 from numpy.typing import NDArray
 
-from hsi_retarget.arm_branch import ArmBranch, Missed, find_branches, missed_contacts, scaled
+from hsi_retarget.arm_branch import ArmBranch
 from hsi_retarget.carry_correction import carry_frames, correct_carry
 from hsi_retarget.foot_clearance import part_sweep
-from hsi_retarget.grasp_windows import GraspWindow
 from hsi_retarget.held_object import attach
 from hsi_retarget.human_motion import SIDES
 from hsi_retarget.humanoid_ik import Footsteps, plan_footsteps
@@ -40,7 +37,7 @@ from hsi_retarget.scene_distance import SceneDistance
 if TYPE_CHECKING:  # retarget imports this module
     from hsi_retarget.retarget import RetargetConfig
 
-__all__ = ["frame_targets", "retrack_missed", "tcp_errors", "track"]
+__all__ = ["Trace", "footstep_plan", "frame_targets", "tcp_errors", "track"]
 
 _LOG = logging.getLogger(__name__)
 F64 = NDArray[np.float64]
@@ -127,7 +124,7 @@ def track(
     it (the later rows stay zero, their errors NaN; with ``trace`` a later call can ``resume`` from it)."""
     n = goals.t.shape[0]
     planned = resume[1].feet if resume is not None else None
-    feet = planned if planned is not None else _footsteps(robot, goals, cfg, part)
+    feet = planned if planned is not None else footstep_plan(robot, goals, cfg, part)
     q = nominal_configuration(robot, goals.root[0], float(goals.lift[0]))
     qs = np.zeros((n, robot.nq))
     carries, corrections = carry_frames(goals.t, events), []
@@ -246,7 +243,7 @@ def track(
     return qs, pos_err, ori_err, diag
 
 
-def _footsteps(
+def footstep_plan(
     robot: RobotModel, goals: RobotGoals, cfg: RetargetConfig, part: PartPhase | None
 ) -> Footsteps | None:
     """A floating base's footstep plan under the pelvis goals, clear of ``part``'s sweep (``None`` for a
@@ -330,143 +327,6 @@ def _residual(
     if first:  # no worse than the last frame's residual
         return all(e <= b + s for e, b, s in pairs)
     return all(e >= b - s for e, b, s in pairs)  # a step that barely helped
-
-
-def retrack_missed(
-    goals: RobotGoals,
-    robot: RobotModel,
-    solver: IKSolver,
-    cfg: RetargetConfig,
-    first: tuple[F64, dict[str, F64], dict[str, Any]],
-    *,
-    part: PartPhase | None,
-    events: Sequence[ContactEvent],
-    windows: Sequence[GraspWindow],
-    objects: Mapping[str, trimesh.Trimesh] | None = None,
-) -> tuple[F64, dict[str, Any]]:
-    """Configurations (T, nq) and diagnostics of ``goals`` tracked again with arm configuration tasks at the
-    grasps and releases of free objects that the ``first`` tracking (configurations, TCP position errors,
-    diagnostics) missed by more than the trigger distance (:mod:`hsi_retarget.arm_branch`), when that
-    misses less in total at all those contacts (``windows``); else the first tracking's. ``objects``: the
-    held objects' meshes, as for :func:`track`.
-    ``diag["arm_branches"]`` reports the search when there was one."""
-    qs, pos_err, diag = first
-    trace = diag.pop("trace", None)
-    posed = diag.get("part", part)
-    branch_cfg = cfg.arm_branch
-    missed = [] if branch_cfg is None else missed_contacts(goals.t, windows, pos_err, branch_cfg.trigger)
-    if branch_cfg is None or not missed:
-        return qs, diag
-    started = time.perf_counter()
-
-    aimed = diag.get("goals", goals)  # as the first pass re-aimed them (carries, the part's contents)
-    # a floating base stands where the first pass had it, on the same footholds
-    feet = trace.feet if isinstance(trace, Trace) else _footsteps(robot, goals, cfg, part)
-
-    def targets_at(i: int) -> IKTargets:  # the opened part as the first pass had it at frame i
-        scene, holder = (None, "") if posed is None else posed.at(float(goals.t[i]))
-        solver.set_part_scene(scene, holder)
-        return frame_targets(aimed, i, feet, holder=holder)
-
-    branches = find_branches(
-        goals,
-        robot,
-        solver,
-        missed,
-        targets_at,
-        config=branch_cfg,
-        start_at=(lambda i: qs[i]) if robot.floating else None,
-    )
-    solver.set_part_scene(None)
-    contacts = missed_contacts(goals.t, windows, pos_err, 0.0)  # every free contact, with its error
-    report: dict[str, Any] = {
-        "missed": [
-            {"side": m.side, "time_s": m.time, "error_m": m.error, "target": m.target} for m in missed
-        ],
-        "found": [{"side": b.side, "time_s": b.time, "static_error_m": b.error} for b in branches],
-        "tried_per_contact": branch_cfg.seeds + 1,
-        "kept": False,
-        "contact_error_before_m": sum(m.error for m in contacts),
-    }
-    if branches:
-        qs, diag = _retrack(
-            goals,
-            robot,
-            solver,
-            cfg,
-            (qs, diag, trace),
-            branches=branches,
-            missed=missed,
-            contacts=contacts,
-            report=report,
-            part=part,
-            events=events,
-            objects=objects,
-        )
-    report["time_s"] = time.perf_counter() - started
-    _LOG.info(
-        "arm branches: %d of %d missed contacts reached by a static solve; tracked again: %s",
-        len(branches),
-        len(missed),
-        "kept" if report["kept"] else "not kept",
-    )
-    diag["arm_branches"] = report
-    return qs, diag
-
-
-def _retrack(
-    goals: RobotGoals,
-    robot: RobotModel,
-    solver: IKSolver,
-    cfg: RetargetConfig,
-    first: tuple[F64, dict[str, Any], Trace | None],
-    *,
-    branches: Sequence[ArmBranch],
-    missed: Sequence[Missed],
-    contacts: Sequence[Missed],
-    report: dict[str, Any],
-    **kwargs: Any,
-) -> tuple[F64, dict[str, Any]]:
-    """The ``first`` tracking (configurations, diagnostics, trace) or ``goals`` tracked again with the
-    ``branches``' arm tasks, scaled by 1 and then each escalation factor while a ``missed`` contact still
-    misses: each try up to the last missed contact only, the one missing least there tracked on to the end
-    and kept when it misses less than the first over all ``contacts`` (``report`` filled in). ``kwargs``:
-    ``part``, ``events``, ``objects`` of :func:`track`."""
-    qs, diag, trace = first
-    n, escalation = goals.t.shape[0], cfg.arm_branch.escalation if cfg.arm_branch else ()
-    trigger = cfg.arm_branch.trigger if cfg.arm_branch else 0.0
-    # the targets differ from the first frame that an arm task weighs on: track on from there
-    start = min(int(np.argmax(b.weight > 0.0)) if (b.weight > 0.0).any() else n for b in branches)
-    resume = (start, trace) if isinstance(trace, Trace) and start < n else None
-    stop = max(m.index for m in missed) + 1  # the tries are compared up to here
-    early = [m for m in contacts if m.index < stop]
-
-    def miss(errors: dict[str, F64], among: Sequence[Missed]) -> float:
-        return sum(float(np.nan_to_num(errors[m.side][m.index], nan=m.error)) for m in among)
-
-    best: tuple[float, float, list[ArmBranch], dict[str, Any]] | None = None
-    report["factors_tried"] = []
-    for factor in (1.0, *escalation):  # harder pulls only while a contact still misses
-        arm = scaled(branches, factor)
-        _, pos2, _, diag2 = track(
-            goals, robot, solver, cfg, arm=arm, resume=resume, trace=True, stop=stop, **kwargs
-        )
-        report["factors_tried"].append(factor)
-        if best is None or miss(pos2, early) < best[0]:
-            best = (miss(pos2, early), factor, arm, diag2)
-        if all(pos2[m.side][m.index] <= trigger for m in missed):
-            break
-    assert best is not None  # at least factor 1 was tried
-    report["factor"] = best[1]
-    if best[0] >= sum(m.error for m in early):  # no try gets nearer there: the rest is not tracked
-        report["contact_error_after_m"] = None  # not tracked to the end
-        return qs, diag
-    qs2, pos2, _, diag2 = track(
-        goals, robot, solver, cfg, arm=best[2], resume=(stop, best[3]["trace"]), **kwargs
-    )
-    report["contact_error_after_m"] = after = miss(pos2, contacts)
-    report["kept"] = after < report["contact_error_before_m"]
-    return (qs2, diag2) if report["kept"] else (qs, diag)
 
 
 def tcp_errors(robot: RobotModel, goals: RobotGoals, qs: F64) -> tuple[dict[str, F64], dict[str, F64]]:
