@@ -13,6 +13,7 @@ import pytest
 from hsi_planning.errors import ConfigError
 from hsi_planning.scene import LayoutConfig, generate_layouts
 from hsi_planning.scene_paths import load_scene
+from hsi_retarget import retrack
 from hsi_retarget.arm_branch import (
     ArmBranch,
     ArmBranchConfig,
@@ -266,6 +267,52 @@ def test_re_tracking_escalates_only_while_a_grasp_still_misses(robot: RobotModel
     assert escalated["contact_error_after_m"] <= plain["contact_error_after_m"] + 1e-12
     assert escalated["factor"] in escalated["factors_tried"]
     assert reached["factors_tried"] == [1.0] and reached["contact_error_after_m"] <= 0.01
+
+
+def test_tries_that_miss_more_are_not_tracked_to_the_end(
+    robot: RobotModel, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """An arm task pulling the right arm away from its grasp: each try (weight x1, x4) misses the grasp by
+    more than the first pass, so the search stops at the grasp frame, tracks nothing further and keeps the
+    first pass (its configurations, the very array)."""
+    n = 90
+    goals = _goals(n)
+    t = goals.t
+    right = np.repeat(_RIGHT[None], n, 0)
+    right[:, 0, 3] = 0.45 + 0.05 * t
+    goals = dataclasses.replace(goals, tcp={"left": goals.tcp["left"], "right": right}, contact={})
+    events = (ContactEvent(float(t[45]), "right", "grasp", "box1"),)
+    solver, cfg = IKSolver(robot), RetargetConfig()
+    qs, pos, _, diag = track(goals, robot, solver, cfg, events=events, trace=True)
+    away = np.array(qs[45])
+    away[robot.arm_q_indices("right")] += np.array([0.8, -0.6, 0.7, 0.5, -0.6, 0.4])
+    branch = ArmBranch("right", float(t[45]), away, np.where(np.arange(n) >= 20, 5.0, 0.0), 0.0)
+    missed = [Missed("right", 45, float(t[45]), 0.05, "box1")]  # as if missed by 5 cm
+    contacts = [Missed("right", 45, float(t[45]), float(pos["right"][45]), "box1")]
+    report: dict[str, object] = {"contact_error_before_m": contacts[0].error, "kept": False}
+    stops: list[object] = []
+
+    def counting(*args: object, **kwargs: object) -> object:
+        stops.append(kwargs.get("stop"))
+        return track(*args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(retrack, "track", counting)
+    out, _ = retrack._retrack(
+        goals,
+        robot,
+        solver,
+        cfg,
+        (qs, diag, diag["trace"]),
+        branches=[branch],
+        missed=missed,
+        contacts=contacts,
+        report=report,
+        part=None,
+        events=events,
+        objects=None,
+    )
+    assert out is qs and report["kept"] is False and report["contact_error_after_m"] is None
+    assert report["factors_tried"] == [1.0, 4.0] and stops == [46, 46]  # both tries end at the grasp
 
 
 def test_scaled_branches_are_copies_with_scaled_weights() -> None:
