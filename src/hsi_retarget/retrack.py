@@ -12,6 +12,7 @@ the end, and kept when it misses less than the first pass over all contacts.
 from __future__ import annotations
 
 import logging
+import math
 import time
 from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any
@@ -150,7 +151,7 @@ def _retrack(
     def miss(errors: dict[str, F64], among: Sequence[Missed]) -> float:
         return sum(float(np.nan_to_num(errors[m.side][m.index], nan=m.error)) for m in among)
 
-    best: tuple[float, float, list[ArmBranch], dict[str, Any]] | None = None
+    best: tuple[float, float, list[ArmBranch], dict[str, Any]] = (math.inf, 1.0, [], {})
     report["factors_tried"] = []
     for factor in (1.0, *escalation):  # harder pulls only while a contact still misses
         arm = scaled(branches, factor)
@@ -158,11 +159,10 @@ def _retrack(
             goals, robot, solver, cfg, arm=arm, resume=resume, trace=True, stop=stop, **kwargs
         )
         report["factors_tried"].append(factor)
-        if best is None or miss(pos2, early) < best[0]:
+        if miss(pos2, early) < best[0]:
             best = (miss(pos2, early), factor, arm, diag2)
         if all(pos2[m.side][m.index] <= trigger for m in missed):
             break
-    assert best is not None  # at least factor 1 was tried
     report["factor"] = best[1]
     if best[0] >= sum(m.error for m in early):  # no try gets nearer there: the rest is not tracked
         report["contact_error_after_m"] = None  # not tracked to the end
