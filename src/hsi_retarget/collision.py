@@ -81,13 +81,13 @@ class SphereSet:
         return np.asarray(mask)
 
     @functools.cached_property
-    def _supports(self) -> dict[int, NDArray[np.bool_]]:
+    def _supports(self) -> dict[tuple[int, int, int], NDArray[np.bool_]]:
         return {}
 
     def support(self, model: pin.Model) -> NDArray[np.bool_]:
         """(S, nv) True where a velocity of ``model`` (the model the spheres were made for) moves the
         sphere: the joints from the root to its link's joint (computed once per model)."""
-        key = id(model)
+        key = (id(model), model.nv, model.njoints)  # the model's identity and shape
         if key not in self._supports:
             mask = np.zeros((self.radii.shape[0], model.nv), dtype=bool)
             for s, fid in enumerate(self.frame_ids.tolist()):
