@@ -304,6 +304,7 @@ def test_tries_that_miss_more_are_not_tracked_to_the_end(
         cfg,
         (qs, diag, diag["trace"]),
         branches=[branch],
+        branch_cfg=ArmBranchConfig(),
         missed=missed,
         contacts=contacts,
         report=report,

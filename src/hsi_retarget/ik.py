@@ -255,6 +255,8 @@ class IKSolver:
             self._pelvis = robot.model.getFrameId(robot.description.links[0].name, pin.FrameType.BODY)
         arms = robot.arm_joints
         self._arm = {s: (robot.arm_q_indices(s), robot.arm_v_indices(s)) for s in arms}  # (q, v) indices
+        #: side -> (n, nv) that arm's joint configuration task (:attr:`IKTargets.arm`)
+        self._arm_jac = {s: np.eye(robot.nv)[iv] for s, (_, iv) in self._arm.items()}
         self._base_v = [robot.v_index(j) for j in BASE_JOINTS if j in robot.joint_names]
         self._base_q = [robot.q_index(j) for j in BASE_JOINTS if j in robot.joint_names]
         #: [rad] the base yaw's range (a holonomic base turns within it, the long way round if need be)
@@ -321,12 +323,10 @@ class IKSolver:
                 weights.append(np.full(3, root_weight))
         for side, (goal_q, weight) in targets.arm.items():
             if weight > 0.0:
-                iq, iv = self._arm[side]
-                jac = np.zeros((iv.shape[0], nv))
-                jac[np.arange(iv.shape[0]), iv] = 1.0
-                jacs.append(jac)
+                iq = self._arm[side][0]
+                jacs.append(self._arm_jac[side])
                 errs.append(np.asarray(goal_q)[iq] - q[iq])
-                weights.append(np.full(iv.shape[0], weight))
+                weights.append(np.full(iq.shape[0], weight))
         if targets.lift is not None and self._lift is not None and cfg.lift_weight > 0.0:
             jacs.append(self._lift_jac)
             errs.append(np.array([targets.lift - q[self._lift[0]]]))

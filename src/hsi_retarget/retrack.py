@@ -21,7 +21,14 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
-from hsi_retarget.arm_branch import ArmBranch, Missed, find_branches, missed_contacts, scaled
+from hsi_retarget.arm_branch import (
+    ArmBranch,
+    ArmBranchConfig,
+    Missed,
+    find_branches,
+    missed_contacts,
+    scaled,
+)
 from hsi_retarget.grasp_windows import GraspWindow
 from hsi_retarget.ik import IKSolver, IKTargets
 from hsi_retarget.joint_trajectory import ContactEvent
@@ -103,6 +110,7 @@ def retrack_missed(
             cfg,
             (qs, diag, trace),
             branches=branches,
+            branch_cfg=branch_cfg,
             missed=missed,
             contacts=contacts,
             report=report,
@@ -129,19 +137,19 @@ def _retrack(
     first: tuple[F64, dict[str, Any], Trace | None],
     *,
     branches: Sequence[ArmBranch],
+    branch_cfg: ArmBranchConfig,
     missed: Sequence[Missed],
     contacts: Sequence[Missed],
     report: dict[str, Any],
     **kwargs: Any,
 ) -> tuple[F64, dict[str, Any]]:
     """The ``first`` tracking (configurations, diagnostics, trace) or ``goals`` tracked again with the
-    ``branches``' arm tasks, scaled by 1 and then each escalation factor while a ``missed`` contact still
-    misses: each try up to the last missed contact only, the one missing least there tracked on to the end
-    and kept when it misses less than the first over all ``contacts`` (``report`` filled in). ``kwargs``:
-    ``part``, ``events``, ``objects`` of :func:`track`."""
+    ``branches``' arm tasks, scaled by 1 and then each escalation factor of ``branch_cfg`` while a ``missed``
+    contact still misses by more than its trigger: each try up to the last missed contact only, the one
+    missing least there tracked on to the end and kept when it misses less than the first over all
+    ``contacts`` (``report`` filled in). ``kwargs``: ``part``, ``events``, ``objects`` of :func:`track`."""
     qs, diag, trace = first
-    n, escalation = goals.t.shape[0], cfg.arm_branch.escalation if cfg.arm_branch else ()
-    trigger = cfg.arm_branch.trigger if cfg.arm_branch else 0.0
+    n = goals.t.shape[0]
     # the targets differ from the first frame that an arm task weighs on: track on from there
     start = min(int(np.argmax(b.weight > 0.0)) if (b.weight > 0.0).any() else n for b in branches)
     resume = (start, trace) if isinstance(trace, Trace) and start < n else None
@@ -153,15 +161,16 @@ def _retrack(
 
     best: tuple[float, float, list[ArmBranch], dict[str, Any]] = (math.inf, 1.0, [], {})
     report["factors_tried"] = []
-    for factor in (1.0, *escalation):  # harder pulls only while a contact still misses
+    for factor in (1.0, *branch_cfg.escalation):  # harder pulls only while a contact still misses
         arm = scaled(branches, factor)
         _, pos2, _, diag2 = track(
             goals, robot, solver, cfg, arm=arm, resume=resume, trace=True, stop=stop, **kwargs
         )
         report["factors_tried"].append(factor)
-        if miss(pos2, early) < best[0]:
-            best = (miss(pos2, early), factor, arm, diag2)
-        if all(pos2[m.side][m.index] <= trigger for m in missed):
+        there = miss(pos2, early)
+        if there < best[0]:
+            best = (there, factor, arm, diag2)
+        if all(pos2[m.side][m.index] <= branch_cfg.trigger for m in missed):
             break
     report["factor"] = best[1]
     if best[0] >= sum(m.error for m in early):  # no try gets nearer there: the rest is not tracked
