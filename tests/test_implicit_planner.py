@@ -20,7 +20,7 @@ from planner_fixture import AXIS, START, scene_cloud, shared_checkpoint
 from scipy.spatial.transform import Rotation
 
 from hsi_planning.errors import ConfigError, PlanningError
-from hsi_planning.fields.descent import descend_field
+from hsi_planning.fields.descent import descend_field, prepare_descent
 from hsi_planning.implicit import segment as segment_module
 from hsi_planning.implicit.path import (
     Clearance,
@@ -568,6 +568,46 @@ def test_the_point_checked_free_mask_changes_only_nodes_near_the_contact_and_kee
     under = (np.linalg.norm(rel[:, :2], axis=1) <= 0.3) & (rel[:, 2] < -2.0 * fields.grid.resolution)
     assert under.any() and not (checked_down & under).any()
     assert (checked_down & ~far).any()
+
+
+def test_a_slot_the_cell_mask_closes_is_opened_by_the_point_check_on_the_way_to_the_wrist() -> None:
+    from hsi_planning.fields import compute_fields
+    from hsi_planning.implicit.runtime_field import box_samples, point_checked_free
+
+    rng = np.random.default_rng(3)
+    contact = np.array([0.44, 0.0, 0.6])  # a 20 cm bottle placed in a slot from x = 0.3 m, 4 cm of room above
+    bottle = np.column_stack([rng.uniform(0.47, 0.53, (300, 2)) - [0.0, 0.5], rng.uniform(0.5, 0.7, 300)])
+    xs, ys = np.meshgrid(np.arange(0.3, 0.8, 0.01), np.arange(-0.3, 0.3, 0.01))
+    floor = np.column_stack([xs.ravel(), ys.ravel(), np.full(xs.size, 0.5)])
+    board = np.column_stack([xs.ravel(), ys.ravel(), np.full(xs.size, 0.74)])
+    points = np.vstack([bottle, floor, board])
+    labels = np.repeat([1, 2, 3], [len(bottle), len(floor), len(board)])
+    fields = compute_fields(points, labels, [1], [2, 3], approach_direction=[-1.0, 0.0, 0.0])
+    grid, far = fields.grid, fields.config.unreachable_time
+    obstacles = Clearance(np.vstack([floor, board]))
+    cfg = ImplicitPlannerConfig()
+    ctx = SegmentContext(
+        fields=fields,
+        clearance=obstacles,
+        contact=contact,
+        contact_clear=float(obstacles(contact)[0]),
+        carried=box_samples(bottle, cfg.carried_padding) - contact,
+        lift=0.02,
+        config=cfg,
+    )
+    phi = np.minimum(fields.dist_t.astype(np.float64) / 0.3, far)  # any time field: only its speed is used
+    free = wrist_free(ctx, carrying=True)(0.01)
+    anchor = np.array([0.15, 0.0, 0.62])  # the wrist in front of the slot
+    near = repair_field(phi, ctx, point_checked_free(ctx, free, 0.01))
+    assert not segment_module._descends_from(grid, near, anchor, far)  # a pocket around the contact
+    kwargs: dict[str, Any] = {"margin": 0.01, "carrying": True, "prep": prepare_descent(grid, phi, far)}
+    fixed = segment_module._repair(phi, ctx, free, anchor=anchor, **kwargs)
+    desc = descend_field(grid, fixed, anchor, contact, blocked_value=far)
+    assert desc.reached
+    assert (ctx.carried_clearance(desc.positions[:-3]) > 0.0).all()  # the box clear of both boards
+    # A wrist outside the grid cannot be judged: the near point check stands.
+    outside = segment_module._repair(phi, ctx, free, anchor=np.array([-2.0, 0.0, 0.6]), **kwargs)
+    np.testing.assert_array_equal(outside, near)
 
 
 def test_the_empty_hand_is_kept_from_reaching_past_its_target(planner: ImplicitPlanner) -> None:

@@ -226,13 +226,16 @@ def _under_contact(ctx: SegmentContext, rel: F64) -> NDArray[np.bool_]:
     return np.asarray((np.linalg.norm(rel[:, :2], axis=1) <= UNDER_RADIUS) & (rel[:, 2] < -2.0 * res))
 
 
-def point_checked_free(ctx: SegmentContext, free: NDArray[np.bool_], margin: float) -> NDArray[np.bool_]:
-    """``free`` (n, n, n) with the nodes within ``clearance_relax`` of the contact decided by the held box's
-    point-based clearance instead of the cell-dilated mask of :func:`wrist_free` (which errs on the safe
-    side by up to a cell and can leave no free node around a contact with little room to lift: a tall
-    object under a board). A node there is free when the hand sphere keeps ``hand_radius + margin``
-    (relaxed towards the contact) and the padded box keeps half of ``carried_margin``; the final path
-    check (:func:`hsi_planning.implicit.segment._violation`) still decides."""
+def point_checked_free(
+    ctx: SegmentContext, free: NDArray[np.bool_], margin: float, radius: float | None = None
+) -> NDArray[np.bool_]:
+    """``free`` (n, n, n) with the nodes within ``radius`` [m] (default ``clearance_relax``) of the contact
+    decided by the held box's point-based clearance instead of the cell-dilated mask of :func:`wrist_free`
+    (which errs on the safe side by up to a cell and can leave no free node around a contact with little
+    room to lift, or no way out of a slot only a few cm taller than the object: a tall object under a
+    board). A node there is free when the hand sphere keeps ``hand_radius + margin`` (relaxed towards the
+    contact) and the padded box keeps half of ``carried_margin``; the final path check
+    (:func:`hsi_planning.implicit.segment._violation`) still decides."""
     cfg, fs = ctx.config, ctx.fields
     grid = fs.grid
     nodes = grid.points()
@@ -242,7 +245,7 @@ def point_checked_free(ctx: SegmentContext, free: NDArray[np.bool_], margin: flo
     )
     hand_ok = ~blocked_nodes(fs).reshape(-1) & (fs.dist_o.reshape(-1) >= need)
     hand_ok &= ~_under_contact(ctx, nodes - ctx.contact)  # as in wrist_free: not under a top-down contact
-    sel = np.flatnonzero((r <= cfg.clearance_relax) & hand_ok)
+    sel = np.flatnonzero((r <= (cfg.clearance_relax if radius is None else radius)) & hand_ok)
     out = free.copy().reshape(-1)
     out[sel] = ctx.carried_clearance(nodes[sel]) >= 0.5 * cfg.carried_margin
     return out.reshape(free.shape)
