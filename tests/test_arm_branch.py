@@ -269,6 +269,55 @@ def test_re_tracking_escalates_only_while_a_grasp_still_misses(robot: RobotModel
     assert reached["factors_tried"] == [1.0] and reached["contact_error_after_m"] <= 0.01
 
 
+def test_a_missed_grasp_is_searched_for_the_grasp_not_for_the_carry_re_aimed_from_the_miss(
+    robot: RobotModel,
+) -> None:
+    """The first pass re-aims the carry from where the hand closed, 3 cm short of the can, from the grasp
+    frame on; the search at the missed grasp solves for the can's grasp pose (the goals as that frame was
+    tracked), not for the pose the hand already had."""
+    spec = generate_layouts(load_scene("narrow_shelf"), 4, 100007, LayoutConfig(reshape=True, target="can1"))[
+        3
+    ]
+    n = 150
+    t = np.linspace(0.0, 2.5, n)
+    u = np.clip(t / 2.0, 0.0, 1.0)
+    left = np.repeat(_LEFT[None], n, 0)
+    left[:, 0, 3] = 0.45 + (_LEFT[0, 3] - 0.45) * u * u * (3.0 - 2.0 * u)
+    goals = dataclasses.replace(
+        _goals(n),
+        t=t,
+        tcp={"left": left, "right": _goals(n).tcp["right"]},
+        contact={"left": np.clip(4 * t - 6, 0, 1)},
+    )
+    # the grasp nearest the frame the carry is re-aimed from (its first at or after the grasp)
+    events = (ContactEvent(2.01, "left", "grasp", "can1"), ContactEvent(2.4, "left", "release", "can1"))
+    windows = [GraspWindow("left", "grasp", "can1", True, 2.01, (1.5, 2.01), (2.01, 2.5))]
+    solver = IKSolver(robot, scene=SceneDistance.from_spec(spec, exclude=("can1", "bottle1")))
+    cfg = RetargetConfig(arm_branch=ArmBranchConfig(seeds=16, escalation=(), trigger=0.01))
+    qs, pos, _, diag = track(goals, robot, solver, cfg, events=events, trace=True)
+    g = int(np.searchsorted(t, 2.01 - 1e-9))
+    assert g == int(np.argmin(np.abs(t - 2.01)))
+    assert pos["left"][g] > 0.02  # the first pass stops short of the can ...
+    aimed = diag["goals"].tcp["left"]
+    assert np.linalg.norm(aimed[g, :3, 3] - _LEFT[:3, 3]) > 0.02  # ... and carries from there
+    trace = diag["trace"]
+    np.testing.assert_array_equal(retrack.tracked_goals(goals, trace, g).tcp["left"][g], left[g])
+    np.testing.assert_array_equal(retrack.tracked_goals(goals, trace, g + 1).tcp["left"][g + 1], aimed[g + 1])
+    found: list[ArmBranch] = []
+    real = retrack.find_branches
+
+    def spy(*args: object, **kwargs: object) -> list[ArmBranch]:
+        found.extend(real(*args, **kwargs))  # type: ignore[arg-type]
+        return found
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(retrack, "find_branches", spy)
+        retrack_missed(goals, robot, solver, cfg, (qs, pos, diag), part=None, events=events, windows=windows)
+    assert len(found) == 1
+    tcp = robot.frame_pose(found[0].q, robot.tcp_frames["left"])
+    assert np.linalg.norm(tcp[:3, 3] - _LEFT[:3, 3]) <= cfg.arm_branch.tolerance  # the can's grasp pose
+
+
 def test_tries_that_miss_more_are_not_tracked_to_the_end(
     robot: RobotModel, monkeypatch: pytest.MonkeyPatch
 ) -> None:

@@ -73,14 +73,13 @@ def retrack_missed(
         return qs, diag
     started = time.perf_counter()
 
-    aimed = diag.get("goals", goals)  # as the first pass re-aimed them (carries, the part's contents)
     # a floating base stands where the first pass had it, on the same footholds
     feet = trace.feet if isinstance(trace, Trace) else footstep_plan(robot, goals, cfg, part)
 
-    def targets_at(i: int) -> IKTargets:  # the opened part as the first pass had it at frame i
+    def targets_at(i: int) -> IKTargets:  # the goals and the opened part as the first pass had them at i
         scene, holder = (None, "") if posed is None else posed.at(float(goals.t[i]))
         solver.set_part_scene(scene, holder)
-        return frame_targets(aimed, i, feet, holder=holder)
+        return frame_targets(tracked_goals(goals, trace, i), i, feet, holder=holder)
 
     branches = find_branches(
         goals,
@@ -127,6 +126,22 @@ def retrack_missed(
     )
     diag["arm_branches"] = report
     return qs, diag
+
+
+def tracked_goals(goals: RobotGoals, trace: Trace | None, i: int) -> RobotGoals:
+    """The goals as the pass of ``trace`` tracked frame ``i``: ``goals`` as re-aimed before that frame. A
+    carry re-aimed at its grasp applies from the next frame on (the grasp frame was tracked towards the
+    grasp itself, the pose a missed grasp is searched for), the goals following the posed part from the
+    frame it was posed on (its version comes first among that frame's). Without a trace: ``goals``."""
+    if not isinstance(trace, Trace):
+        return goals
+    posed_at = trace.posed[0] if trace.posed is not None else -1
+    out, last = goals, -1
+    for frame, version, _ in trace.versions:
+        if frame < i or (frame == i == posed_at and last != i):
+            out = version
+        last = frame
+    return out
 
 
 def _retrack(
