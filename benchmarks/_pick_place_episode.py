@@ -11,8 +11,12 @@ finds the moment of the new trajectory closest to the robot's current configurat
 there after a short joint-space blend. The re-plan keeps the executed plan's grasping hand and the hand
 that opened the door or drawer (``DemoTask.door_hand``), is joined only at a moment where its hands hold
 what the robot's hold now, and one whose gripper events contradict what the hands hold (a hand holding the
-door told to grasp the object) is not taken: the executed plan goes on. Pushes are not re-planned (the
-controller recovers). The wrapper goes away when ``run_task`` takes a perturbation config.
+door told to grasp the object) is not taken: the executed plan goes on. When the re-plan itself fails
+(the scheduler or an optimizer on the new layout), the executed schedule is retargeted again with the
+target's grasp re-aimed at its new place (``robot_trajectory(..., moved=...)``,
+:mod:`hsi_retarget.moved_target`) and joined the same way (``perturbation.reaimed`` counts these).
+Pushes are not re-planned (the controller recovers). The wrapper goes away when ``run_task`` takes a
+perturbation config.
 
 IK time: ``trajectory.meta`` of the retargeting (``ik_time_s`` over ``frames``: per-frame differential IK,
 the arm-branch search and second tracking pass where a grasp was missed, joint smoothing and residuals of
@@ -42,7 +46,7 @@ from hsi_nodes.demo.pipeline import (
     run_task,
 )
 from hsi_nodes.demo.tasks import DemoTask
-from hsi_planning.errors import HsiError, RetargetError
+from hsi_planning.errors import HsiError, PlanningError, RetargetError
 from hsi_planning.perception import CloudConfig, LabelledCloud
 from hsi_planning.planning import Planner
 from hsi_planning.scene import SceneSpec, moved_object
@@ -190,7 +194,7 @@ def perturbed_execution(
 
     original = sim_check.execute
     task = demo_task(case)
-    record.update(events=[], replans=0, replan_wall_s=0.0, replan_errors=[], replan_ik_fps=[])
+    record.update(events=[], replans=0, replan_wall_s=0.0, replan_errors=[], replan_ik_fps=[], reaimed=0)
     roles = {"hand": "", "door": ""}  #: the executed plan's grasping and opening hands, kept by a re-plan
 
     def hook(world: Any, event: Any, start: float) -> Any:
@@ -200,7 +204,15 @@ def perturbed_execution(
         try:
             spec = moved_object(case.spec, event.object_name, event.offset)
             replan = dataclasses.replace(task, hand=roles["hand"], door_hand=roles["door"])
-            new = _plan_trajectory(replan, spec, planner, cfg)
+            try:
+                new = _plan_trajectory(replan, spec, planner, cfg)
+            except PlanningError as exc:  # the executed schedule, its grasp re-aimed at the moved target
+                if record.get("schedule") is None:
+                    raise
+                record["replan_errors"].append(f"{type(exc).__name__}: {exc}")
+                moved = {event.object_name: np.asarray(event.offset, dtype=np.float64)}
+                new = robot_trajectory(record["schedule"], spec, cfg, moved=moved)
+                record["reaimed"] += 1
             t_now = world.time - start
             held = {h: body for (h, body), eq in world.welds.items() if world.data.eq_active[eq]}
             joined = join(new, world.robot_q(), t_now, world, held)
@@ -276,7 +288,10 @@ def run_episode(
     cloud = observe(case.spec)
     record: dict[str, Any] = {}
     with perturbed_execution(case, planner, cfg, seed, record) if perturbed else contextlib.nullcontext():
-        outcome = run_task(demo_task(case), case.spec, cloud, planner, cfg)
+        outcome = run_task(
+            demo_task(case), case.spec, cloud, planner, cfg, on_schedule=lambda s: record.update(schedule=s)
+        )
+    record.pop("schedule", None)
     rep = outcome.report
     ms, fps, frames = _ik(outcome)
     meta = outcome.trajectory.meta if outcome.trajectory is not None else {}

@@ -114,7 +114,9 @@ def _reason(row: dict[str, Any]) -> str:
     if row.get("stage") != "done":
         return f"{row.get('stage')}: {str(row.get('error', ''))[:60]}"
     first = (row.get("failures") or ["?"])[0]
-    replan = " (re-plan failed)" if (row.get("perturbation") or {}).get("replan_errors") else ""
+    perturbation = row.get("perturbation") or {}
+    replan = " (re-plan failed)" if perturbation.get("replan_errors") else ""
+    replan = " (re-plan failed, grasp re-aimed)" if perturbation.get("reaimed") else replan
     for word in ("placement", "collid", "opened", "limit", "fell", "grasp"):
         if word in first:
             return f"execute: {word}{replan}"

@@ -24,6 +24,7 @@ from hsi_nodes.demo.pipeline import (
     TaskOutcome,
     make_demo_planner,
     resolve_task,
+    robot_trajectory,
     run_task,
 )
 from hsi_nodes.demo.runner import scene_cloud
@@ -41,7 +42,7 @@ from hsi_nodes.nodes.sim_check_node import SimCheckNode, SimCheckNodeConfig
 from hsi_nodes.transport import make_transport
 from hsi_nodes.transport.base import QoS, Transport
 from hsi_planning.config import from_mapping
-from hsi_planning.errors import ConfigError, PlanningError
+from hsi_planning.errors import ConfigError, PlanningError, RetargetError
 from hsi_planning.perception import LabelledCloud
 from hsi_planning.scene import SceneSpec
 from hsi_planning.scene.model import support_surface
@@ -297,6 +298,32 @@ def test_a_grasped_object_rides_with_its_hand_as_ik_geometry(dual_arm: TaskOutco
     grasp = next(e for e in schedule.events() if e.contact_event == "grasp")
     assert (held["hand"], held["object"]) == (grasp.hand, "can1")
     assert held["time_s"] == pytest.approx(grasp.time, abs=0.1)
+
+
+def test_a_moved_can_is_grasped_where_it_is_and_placed_where_planned(dual_arm: TaskOutcome) -> None:
+    """The executed schedule retargeted with the can pushed 3 cm: the hand closes around it there (the
+    grasp goal and the reached TCP moved by the push) and releases it where the first plan did."""
+    from hsi_planning.scene import moved_object
+    from hsi_retarget.robots import RobotModel
+
+    schedule, first = dual_arm.schedule, dual_arm.trajectory
+    assert schedule is not None and first is not None
+    push = np.array([0.02, -0.025, 0.0])
+    spec = moved_object(load_scene("kitchen"), "can1", push)
+    config = PipelineConfig(robot="dual_arm", planner="reach_model")
+    moved = robot_trajectory(schedule, spec, config, moved={"can1": push})
+    (record,) = moved.meta["moved_grasps"]
+    assert record["object"] == "can1"
+    robot = RobotModel("dual_ur5e")
+
+    def tcp_at(traj: Any, kind: str) -> np.ndarray:
+        event = next(e for e in traj.events if e.kind == kind and e.object_name == "can1")
+        return robot.frame_pose(traj.sample(event.time), robot.tcp_frames[event.hand])[:3, 3]
+
+    np.testing.assert_allclose(tcp_at(moved, "grasp") - tcp_at(first, "grasp"), push, atol=0.01)
+    np.testing.assert_allclose(tcp_at(moved, "release"), tcp_at(first, "release"), atol=0.01)
+    with pytest.raises(RetargetError, match="never grasped"):
+        robot_trajectory(schedule, spec, config, moved={"mug2": push})
 
 
 def test_counter_pick_and_place_succeeds_on_the_humanoid(kitchen_cloud: LabelledCloud) -> None:

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, TypeAlias, cast
 
@@ -45,6 +45,7 @@ from hsi_retarget.mapping import (
     MappingConfig,
     map_to_robot,
 )
+from hsi_retarget.moved_target import shift_grasps
 from hsi_retarget.part_scene import PartPhase, opened_part
 from hsi_retarget.retrack import retrack_missed
 from hsi_retarget.robots import RobotModel
@@ -150,29 +151,47 @@ def _free_objects(scene: Any, motion: HumanMotion) -> list[str]:
 
 
 def _human_motion(
-    source: Source, cfg: RetargetConfig, scene: Any = None
-) -> tuple[HumanMotion, list[dict[str, Any]], list[GraspWindow]]:
+    source: Source, cfg: RetargetConfig, scene: Any = None, moved: Mapping[str, Any] | None = None
+) -> tuple[HumanMotion, list[dict[str, Any]], list[GraspWindow], list[dict[str, Any]]]:
     """The human goals of ``source`` (a schedule's with gripper goals around its grasps when
-    ``cfg.grasp`` is set, turned to grip across, :mod:`hsi_retarget.grip_turn`), the grasps turned and the
-    grasp windows (empty unless shaped)."""
+    ``cfg.grasp`` is set, turned to grip across, :mod:`hsi_retarget.grip_turn`, the grasps of ``moved``
+    objects re-aimed, :mod:`hsi_retarget.moved_target`), the grasps turned, the grasp windows (empty
+    unless shaped) and the grasps re-aimed."""
+    if moved and (cfg.grasp is None or not hasattr(source, "segments") or isinstance(source, HumanMotion)):
+        raise RetargetError(
+            "moved objects are re-aimed in a schedule's grasps: give a Schedule and config.grasp"
+        )
     if isinstance(source, HumanMotion):
-        return source, [], []
+        return source, [], [], []
     if hasattr(source, "keyframes") and hasattr(source, "segments"):  # a Schedule
         schedule = cast("Schedule", source)
         motion = human_motion_from_schedule(schedule, cfg.sample_rate)
         turns: list[dict[str, Any]] = []
         windows: list[GraspWindow] = []
+        shifted: list[dict[str, Any]] = []
         if cfg.grasp is not None:
             windows = grasp_windows(schedule, _free_objects(scene, motion), cfg.grasp, container_rims(scene))
             if hasattr(scene, "furniture"):  # a scene spec: its handle bars and object shapes
                 bars, prims = handle_bar_axes(scene), object_prims(scene)
                 motion, turns = turn_grips(motion, windows, bars, prims, cfg.grip)
+            if moved:
+                motion, shifted = shift_grasps(motion, windows, moved)
             motion = shape_grasps(motion, windows, cfg.grasp)
-        return motion, turns, windows
+        return motion, turns, windows, shifted
     segments = [source] if isinstance(source, WristTrajectory) else list(source)
     if not all(isinstance(s, WristTrajectory) for s in segments):
         raise RetargetError("retarget() takes a HumanMotion, a Schedule or WristTrajectory segments")
-    return human_motion_from_wrists(segments, cfg.hip, rate=cfg.sample_rate), [], []
+    return human_motion_from_wrists(segments, cfg.hip, rate=cfg.sample_rate), [], [], []
+
+
+def _moved_carry(record: dict[str, Any], moved: Mapping[str, Any]) -> dict[str, Any]:
+    """A schedule's carry record with its grasp-time bottom centre moved by its object's displacement."""
+    name = str(record.get("object", ""))
+    if name not in moved or "grasp" not in record:
+        return record
+    shift: F64 = np.asarray(moved[name], dtype=np.float64)
+    grasp = np.asarray(record["grasp"], dtype=np.float64) + shift
+    return {**record, "grasp": grasp}
 
 
 def _object_meshes(scene: Any, motion: HumanMotion) -> dict[str, Any] | None:
@@ -223,6 +242,8 @@ def retarget(
     robot: RobotModel | str,
     scene: Any = None,
     config: RetargetConfig | None = None,
+    *,
+    moved: Mapping[str, Any] | None = None,
 ) -> JointTrajectory:
     """Retarget human goals onto ``robot`` (see the module docstring).
 
@@ -234,6 +255,8 @@ def retarget(
             out; its objects are the free ones of ``config.grasp``), a :class:`SceneDistance`, or ``None``
             (no scene margins).
         config: :class:`RetargetConfig`.
+        moved: object name -> (3,) [m] its displacement since a Schedule ``source`` was planned: its grasps
+            re-aimed there (:mod:`hsi_retarget.moved_target`; needs ``config.grasp``).
 
     Returns:
         The timed trajectory; ``meta`` reports the mapping (scale, anchor), unreachable goals (per-sample
@@ -245,7 +268,7 @@ def retarget(
         fingers = next(iter(model.gripper_joints.values()), ())
         opening = float(sum(model.q_upper[model.q_index(j)] for j in fingers))
         cfg = replace(cfg, grip=replace(cfg.grip, opening=opening or DEFAULT_OPENING))
-    motion, handle_turns, windows = _human_motion(source, cfg, scene)
+    motion, handle_turns, windows, shifted = _human_motion(source, cfg, scene, moved)
     mapping = cfg.mapping or MappingConfig(anchor="shoulder" if motion.shoulder_position else "world")
     t0 = time.perf_counter()
     goals = map_to_robot(motion, model, mapping)
@@ -259,6 +282,8 @@ def retarget(
         )
     placed: list[dict[str, Any]] = []
     carry_records = getattr(source, "info", {}).get("carries", []) if cfg.correct_carry else []
+    if moved and carry_records:  # a moved object is grasped where it is now
+        carry_records = [_moved_carry(c, moved) for c in carry_records]
     if carry_records:  # the planned goals may not hold each object at its release as at its grasp
         goals, placed = place_carries(goals, motion.events, carry_records)
     t1 = time.perf_counter()
@@ -326,6 +351,7 @@ def retarget(
         "goal_time": goals.t,
         "time_scaling": timing.summary(goals.t),
         "handle_turns": handle_turns,
+        "moved_grasps": shifted,
         "finger_room": finger_room,
         "carry_placements": placed,
         **diag,

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -280,9 +280,13 @@ def resolve_task(task: DemoTask, world: SceneWorld, config: SchedulerConfig) -> 
     )
 
 
-def robot_trajectory(schedule: Schedule, spec: SceneSpec, config: PipelineConfig) -> JointTrajectory:
+def robot_trajectory(
+    schedule: Schedule, spec: SceneSpec, config: PipelineConfig, moved: Mapping[str, Any] | None = None
+) -> JointTrajectory:
     """``schedule`` on ``config.robot`` in ``spec``: retargeted with the gripper goals around its grasps
-    (``config.grasp``), standing still at the gripper events (``config.dwell``).
+    (``config.grasp``), standing still at the gripper events (``config.dwell``); the grasps of ``moved``
+    objects (name -> (3,) [m] displacement since ``schedule`` was planned) re-aimed at where they are
+    (:mod:`hsi_retarget.moved_target`).
 
     Raises:
         RetargetError: the robot cannot follow the schedule (see :func:`~hsi_retarget.retarget.retarget`).
@@ -290,7 +294,8 @@ def robot_trajectory(schedule: Schedule, spec: SceneSpec, config: PipelineConfig
     from hsi_retarget.retarget import RetargetConfig, retarget
 
     retarget_config = RetargetConfig(sample_rate=config.sample_rate, grasp=config.grasp)
-    return add_gripper_dwell(retarget(schedule, config.robot, spec, retarget_config), config.dwell)
+    trajectory = retarget(schedule, config.robot, spec, retarget_config, moved=moved)
+    return add_gripper_dwell(trajectory, config.dwell)
 
 
 def _opening_hook(world: SimWorld, part: str, inner: FrameHook | None) -> tuple[FrameHook, list[float]]:
