@@ -528,14 +528,16 @@ def test_completion_extends_a_hidden_bottom_down_to_the_support_only() -> None:
     assert furniture_mask(labels, None, [2]).tolist() == [True, True, False, False]
 
 
-def test_the_point_checked_free_mask_changes_only_nodes_near_the_contact_and_keeps_the_box_clear() -> None:
+def _bottle_under_a_board(front: float) -> tuple[Any, SegmentContext]:
+    """(fields, segment context) of a wrist in front of a 20 cm bottle on a floor with a board 4 cm above it,
+    both from x = ``front`` [m]; the bottle is held (its padded box carried)."""
     from hsi_planning.fields import compute_fields
-    from hsi_planning.implicit.runtime_field import box_samples, point_checked_free, wrist_free
+    from hsi_planning.implicit.runtime_field import box_samples
 
     rng = np.random.default_rng(3)
-    contact = np.array([0.44, 0.0, 0.6])  # wrist in front of a 20 cm bottle on a floor, a board 4 cm above
+    contact = np.array([0.44, 0.0, 0.6])
     bottle = np.column_stack([rng.uniform(0.47, 0.53, (300, 2)) - [0.0, 0.5], rng.uniform(0.5, 0.7, 300)])
-    xs, ys = np.meshgrid(np.arange(0.2, 0.8, 0.01), np.arange(-0.3, 0.3, 0.01))
+    xs, ys = np.meshgrid(np.arange(front, 0.8, 0.01), np.arange(-0.3, 0.3, 0.01))
     floor = np.column_stack([xs.ravel(), ys.ravel(), np.full(xs.size, 0.5)])
     board = np.column_stack([xs.ravel(), ys.ravel(), np.full(xs.size, 0.74)])
     points = np.vstack([bottle, floor, board])
@@ -552,6 +554,14 @@ def test_the_point_checked_free_mask_changes_only_nodes_near_the_contact_and_kee
         lift=0.02,
         config=cfg,
     )
+    return fields, ctx
+
+
+def test_the_point_checked_free_mask_changes_only_nodes_near_the_contact_and_keeps_the_box_clear() -> None:
+    from hsi_planning.implicit.runtime_field import point_checked_free, wrist_free
+
+    fields, ctx = _bottle_under_a_board(0.2)
+    contact, cfg = ctx.contact, ctx.config
     free = wrist_free(ctx, carrying=True)(0.01)
     checked = point_checked_free(ctx, free, 0.01)
     nodes = fields.grid.points()
@@ -571,30 +581,11 @@ def test_the_point_checked_free_mask_changes_only_nodes_near_the_contact_and_kee
 
 
 def test_a_slot_the_cell_mask_closes_is_opened_by_the_point_check_on_the_way_to_the_wrist() -> None:
-    from hsi_planning.fields import compute_fields
-    from hsi_planning.implicit.runtime_field import box_samples, point_checked_free
+    from hsi_planning.implicit.runtime_field import point_checked_free
 
-    rng = np.random.default_rng(3)
-    contact = np.array([0.44, 0.0, 0.6])  # a 20 cm bottle placed in a slot from x = 0.3 m, 4 cm of room above
-    bottle = np.column_stack([rng.uniform(0.47, 0.53, (300, 2)) - [0.0, 0.5], rng.uniform(0.5, 0.7, 300)])
-    xs, ys = np.meshgrid(np.arange(0.3, 0.8, 0.01), np.arange(-0.3, 0.3, 0.01))
-    floor = np.column_stack([xs.ravel(), ys.ravel(), np.full(xs.size, 0.5)])
-    board = np.column_stack([xs.ravel(), ys.ravel(), np.full(xs.size, 0.74)])
-    points = np.vstack([bottle, floor, board])
-    labels = np.repeat([1, 2, 3], [len(bottle), len(floor), len(board)])
-    fields = compute_fields(points, labels, [1], [2, 3], approach_direction=[-1.0, 0.0, 0.0])
+    fields, ctx = _bottle_under_a_board(0.3)  # placed in a slot from x = 0.3 m, 4 cm of room above
+    contact = ctx.contact
     grid, far = fields.grid, fields.config.unreachable_time
-    obstacles = Clearance(np.vstack([floor, board]))
-    cfg = ImplicitPlannerConfig()
-    ctx = SegmentContext(
-        fields=fields,
-        clearance=obstacles,
-        contact=contact,
-        contact_clear=float(obstacles(contact)[0]),
-        carried=box_samples(bottle, cfg.carried_padding) - contact,
-        lift=0.02,
-        config=cfg,
-    )
     phi = np.minimum(fields.dist_t.astype(np.float64) / 0.3, far)  # any time field: only its speed is used
     free = wrist_free(ctx, carrying=True)(0.01)
     anchor = np.array([0.15, 0.0, 0.62])  # the wrist in front of the slot

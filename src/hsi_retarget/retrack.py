@@ -40,7 +40,7 @@ from hsi_retarget.tracking import Trace, footstep_plan, frame_targets, track
 if TYPE_CHECKING:
     from hsi_retarget.retarget import RetargetConfig
 
-__all__ = ["retrack_missed"]
+__all__ = ["retrack_missed", "tracked_goals"]
 
 F64 = NDArray[np.float64]
 _LOG = logging.getLogger(__name__)
