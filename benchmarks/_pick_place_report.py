@@ -186,8 +186,7 @@ def markdown(results: dict[str, Any]) -> str:
         "Perturbed: 2 pushes (40–120 N, 0.1 s) on arm links and the target moved 2.5–5 cm (clear of its",
         "neighbours, on its support) before the first grasp of a free object (the target or a blocker),",
         "followed by re-planning: the executed schedule retargeted with that grasp re-aimed at the moved",
-        "object (a full re-plan for moves beyond 5 cm or where that fails;",
-        "benchmarks/_pick_place_episode.py).",
+        "object (a full re-plan for moves beyond 5 cm or where that fails; benchmarks/_pick_place_episode.py).",
         "",
     ]
     return "\n".join(lines)
