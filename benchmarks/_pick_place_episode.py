@@ -4,19 +4,19 @@
 Perturbations. ``run_task`` has no perturbation argument yet, so a perturbed episode runs it with the
 package-level :func:`hsi_retarget.sim_check.execute` (which ``run_task`` imports at call time) temporarily
 replaced by a wrapper that adds seeded events (:func:`hsi_retarget.sim_check.random_perturbations`: pushes
-on arm links, the target moved up to 5 cm before its grasp) and a re-plan hook. On a target move beyond
-:data:`REAIM_MAX` the hook re-plans like the pipeline does (the layout with the object at its new place is
-re-observed, the task re-resolved and re-scheduled, then turned into a robot trajectory by the pipeline's
-``robot_trajectory``), finds the moment of the new trajectory closest to the robot's current configuration
-and continues from there after a short joint-space blend. The re-plan keeps the executed plan's grasping
-hand and the hand that opened the door or drawer (``DemoTask.door_hand``), is joined only at a moment where
-its hands hold what the robot's hold now, and one whose gripper events contradict what the hands hold (a
-hand holding the door told to grasp the object) is not taken: the executed plan goes on. A target moved at
-most :data:`REAIM_MAX` is not planned again from scratch: the executed schedule is retargeted with the
+on arm links, the target moved up to 5 cm before its grasp) and a re-plan hook. On a target move the hook
+re-plans like the pipeline does (the layout with the object at its new place is re-observed, the task
+re-resolved and re-scheduled, then turned into a robot trajectory by the pipeline's ``robot_trajectory``),
+finds the moment of the new trajectory closest to the robot's current configuration and continues from
+there after a short joint-space blend. The re-plan keeps the executed plan's grasping hand and the hand
+that opened the door or drawer (``DemoTask.door_hand``), is joined only at a moment where its hands hold
+what the robot's hold now, and one whose gripper events contradict what the hands hold (a hand holding the
+door told to grasp the object) is not taken: the executed plan goes on. When the re-plan itself fails
+(the scheduler or an optimizer on the new layout), the executed schedule is retargeted again with the
 target's grasp re-aimed at its new place (``robot_trajectory(..., moved=...)``,
-:mod:`hsi_retarget.moved_target`; ``perturbation.reaimed`` counts these) and joined the same way; the full
-re-plan is the fallback (farther moves, or a re-aimed retargeting that fails). Pushes are not re-planned
-(the controller recovers). The wrapper goes away when ``run_task`` takes a perturbation config.
+:mod:`hsi_retarget.moved_target`) and joined the same way (``perturbation.reaimed`` counts these).
+Pushes are not re-planned (the controller recovers). The wrapper goes away when ``run_task`` takes a
+perturbation config.
 
 IK time: ``trajectory.meta`` of the retargeting (``ik_time_s`` over ``frames``: per-frame differential IK,
 the arm-branch search and second tracking pass where a grasp was missed, joint smoothing and residuals of
@@ -46,7 +46,7 @@ from hsi_nodes.demo.pipeline import (
     run_task,
 )
 from hsi_nodes.demo.tasks import DemoTask
-from hsi_planning.errors import HsiError, RetargetError
+from hsi_planning.errors import HsiError, PlanningError, RetargetError
 from hsi_planning.perception import CloudConfig, LabelledCloud
 from hsi_planning.planning import Planner
 from hsi_planning.scene import SceneSpec, moved_object
@@ -56,10 +56,6 @@ _LOG = logging.getLogger("pick_place")
 BLEND_MIN_S = 0.3  #: [s] shortest joint-space blend from the current configuration into a re-plan
 BLEND_SPEED = 0.5  #: [-] fraction of the joint velocity limits used by that blend
 MATCH_WINDOW_S = 3.0  #: [s] a re-plan is joined within this time of the current trajectory time
-#: [m] a target moved at most this far is re-aimed in the executed schedule; farther, it is planned again.
-#: Measured over the 50 perturbed dual-arm episodes (moves of 2.5-5 cm): re-aimed first 78% succeed,
-#: planned again first (re-aimed only where that failed) 72%.
-REAIM_MAX = 0.05
 CLOUD_VOXEL = 0.01  #: [m] voxel of the rendered clouds (as the demo's runner)
 
 _planners: dict[tuple[str, str], Planner] = {}
@@ -208,9 +204,15 @@ def perturbed_execution(
         try:
             spec = moved_object(case.spec, event.object_name, event.offset)
             replan = dataclasses.replace(task, hand=roles["hand"], door_hand=roles["door"])
-            new = _reaimed(record.get("schedule"), spec, cfg, event, record)
-            if new is None:  # moved too far, or the re-aimed retargeting failed: plan again
+            try:
                 new = _plan_trajectory(replan, spec, planner, cfg)
+            except PlanningError as exc:  # the executed schedule, its grasp re-aimed at the moved target
+                if record.get("schedule") is None:
+                    raise
+                record["replan_errors"].append(f"{type(exc).__name__}: {exc}")
+                moved = {event.object_name: np.asarray(event.offset, dtype=np.float64)}
+                new = robot_trajectory(record["schedule"], spec, cfg, moved=moved)
+                record["reaimed"] += 1
             t_now = world.time - start
             held = {h: body for (h, body), eq in world.welds.items() if world.data.eq_active[eq]}
             joined = join(new, world.robot_q(), t_now, world, held)
@@ -243,22 +245,6 @@ def perturbed_execution(
         yield
     finally:
         sim_check.execute = original
-
-
-def _reaimed(schedule: Any, spec: SceneSpec, cfg: PipelineConfig, event: Any, record: dict[str, Any]) -> Any:
-    """The executed ``schedule`` retargeted in ``spec`` with its grasp of the object a target-move
-    ``event`` displaced re-aimed at where it is now (:mod:`hsi_retarget.moved_target`), or ``None``: no
-    schedule, moved farther than :data:`REAIM_MAX`, or the retargeting failed (``record`` notes it)."""
-    offset = np.asarray(event.offset, dtype=np.float64)
-    if schedule is None or float(np.linalg.norm(offset)) > REAIM_MAX:
-        return None
-    try:
-        new = robot_trajectory(schedule, spec, cfg, moved={event.object_name: offset})
-    except RetargetError as exc:
-        record["replan_errors"].append(f"re-aim: {type(exc).__name__}: {exc}")
-        return None
-    record["reaimed"] += 1
-    return new
 
 
 def _ik(outcome: TaskOutcome) -> tuple[float, float, int]:

@@ -116,7 +116,7 @@ def _reason(row: dict[str, Any]) -> str:
     first = (row.get("failures") or ["?"])[0]
     perturbation = row.get("perturbation") or {}
     replan = " (re-plan failed)" if perturbation.get("replan_errors") else ""
-    replan = " (grasp re-aimed)" if perturbation.get("reaimed") else replan
+    replan = " (re-plan failed, grasp re-aimed)" if perturbation.get("reaimed") else replan
     for word in ("placement", "collid", "opened", "limit", "fell", "grasp"):
         if word in first:
             return f"execute: {word}{replan}"
@@ -185,8 +185,7 @@ def markdown(results: dict[str, Any]) -> str:
         "smoothing and residuals alone.",
         "Perturbed: 2 pushes (40–120 N, 0.1 s) on arm links and the target moved 2.5–5 cm (clear of its",
         "neighbours, on its support) before the first grasp of a free object (the target or a blocker),",
-        "followed by re-planning: the executed schedule retargeted with that grasp re-aimed at the moved",
-        "object (a full re-plan for moves beyond 5 cm or where that fails; benchmarks/_pick_place_episode.py).",
+        "followed by re-planning (benchmarks/_pick_place_episode.py).",
         "",
     ]
     return "\n".join(lines)
