@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -24,7 +25,7 @@ from hsi_retarget.easing import ease
 from hsi_retarget.grasp_windows import GraspWindow
 from hsi_retarget.human_motion import HumanMotion
 
-__all__ = ["MAX_SHIFT", "shift_grasps"]
+__all__ = ["MAX_SHIFT", "moved_carries", "shift_grasps"]
 
 F64 = NDArray[np.float64]
 MAX_SHIFT = 0.25  #: [m] largest displacement re-aimed this way (farther: plan again)
@@ -64,6 +65,23 @@ def shift_grasps(
                 {"hand": w.hand, "object": name, "time_s": float(w.time), "shift_m": d.round(4).tolist()}
             )
     return replace(motion, wrist_position=positions), records
+
+
+def moved_carries(
+    records: Sequence[Mapping[str, Any]], moved: Mapping[str, ArrayLike]
+) -> list[Mapping[str, Any]]:
+    """A schedule's carry records (:func:`~hsi_retarget.carry_correction.place_carries`) with the
+    grasp-time bottom centre of each ``moved`` object (name -> (3,) [m] displacement) moved with it (copies
+    where changed): the carry is then re-aimed from where the object is grasped now onto its placement."""
+    out: list[Mapping[str, Any]] = []
+    for record in records:
+        name = str(record.get("object", ""))
+        if name in moved and "grasp" in record:
+            shift = np.asarray(moved[name], dtype=np.float64)
+            out.append({**record, "grasp": np.asarray(record["grasp"], dtype=np.float64) + shift})
+        else:
+            out.append(record)
+    return out
 
 
 def _grasped(windows: Sequence[GraspWindow]) -> list[str]:

@@ -45,7 +45,7 @@ from hsi_retarget.mapping import (
     MappingConfig,
     map_to_robot,
 )
-from hsi_retarget.moved_target import shift_grasps
+from hsi_retarget.moved_target import moved_carries, shift_grasps
 from hsi_retarget.part_scene import PartPhase, opened_part
 from hsi_retarget.retrack import retrack_missed
 from hsi_retarget.robots import RobotModel
@@ -157,7 +157,8 @@ def _human_motion(
     ``cfg.grasp`` is set, turned to grip across, :mod:`hsi_retarget.grip_turn`, the grasps of ``moved``
     objects re-aimed, :mod:`hsi_retarget.moved_target`), the grasps turned, the grasp windows (empty
     unless shaped) and the grasps re-aimed."""
-    if moved and (cfg.grasp is None or not hasattr(source, "segments") or isinstance(source, HumanMotion)):
+    is_schedule = hasattr(source, "keyframes") and hasattr(source, "segments")
+    if moved and (cfg.grasp is None or not is_schedule):
         raise RetargetError(
             "moved objects are re-aimed in a schedule's grasps: give a Schedule and config.grasp"
         )
@@ -182,16 +183,6 @@ def _human_motion(
     if not all(isinstance(s, WristTrajectory) for s in segments):
         raise RetargetError("retarget() takes a HumanMotion, a Schedule or WristTrajectory segments")
     return human_motion_from_wrists(segments, cfg.hip, rate=cfg.sample_rate), [], [], []
-
-
-def _moved_carry(record: dict[str, Any], moved: Mapping[str, Any]) -> dict[str, Any]:
-    """A schedule's carry record with its grasp-time bottom centre moved by its object's displacement."""
-    name = str(record.get("object", ""))
-    if name not in moved or "grasp" not in record:
-        return record
-    shift: F64 = np.asarray(moved[name], dtype=np.float64)
-    grasp = np.asarray(record["grasp"], dtype=np.float64) + shift
-    return {**record, "grasp": grasp}
 
 
 def _object_meshes(scene: Any, motion: HumanMotion) -> dict[str, Any] | None:
@@ -283,7 +274,7 @@ def retarget(
     placed: list[dict[str, Any]] = []
     carry_records = getattr(source, "info", {}).get("carries", []) if cfg.correct_carry else []
     if moved and carry_records:  # a moved object is grasped where it is now
-        carry_records = [_moved_carry(c, moved) for c in carry_records]
+        carry_records = moved_carries(carry_records, moved)
     if carry_records:  # the planned goals may not hold each object at its release as at its grasp
         goals, placed = place_carries(goals, motion.events, carry_records)
     t1 = time.perf_counter()
