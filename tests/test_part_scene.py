@@ -29,15 +29,16 @@ SIDE = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 
 def _phase(part: str) -> PartPhase:
     """The phase of a schedule whose right hand reaches ``part``'s handle by 1 s, opens it by 2 s, holds
-    it to 2.5 s while the left hand grasps mug1 at 3 s, and closes it from 4 s."""
+    it to 2.5 s while the left hand grasps mug1 at 3 s, closes it from 4 s and lets go at 4.8 s."""
 
-    def key(t: float, hand: str, action: str, obj: str = "") -> SimpleNamespace:
-        return SimpleNamespace(time=t, hand=hand, action=action, object_name=obj)
+    def key(t: float, hand: str, action: str, obj: str = "", event: str = "") -> SimpleNamespace:
+        return SimpleNamespace(time=t, hand=hand, action=action, object_name=obj, contact_event=event)
 
     keys = [key(0.0, "right", "idle"), key(1.0, "right", "reach", part), key(1.5, "right", "open", part)]
     keys += [key(2.0, "right", "open", part), key(2.5, "right", "hold", part)]
     keys += [key(3.0, "left", "grasp", "mug1")]
-    keys += [key(4.0, "right", "close", part), key(5.0, "right", "idle")]
+    keys += [key(4.0, "right", "close", part), key(4.8, "right", "release", part, "release")]
+    keys += [key(5.0, "right", "idle")]
     schedule = SimpleNamespace(info={"part": part, "door_hand": "right"}, keyframes=keys)
     phase = opened_part(schedule, load_scene("kitchen"), exclude=("mug1",))  # type: ignore[arg-type]
     assert phase is not None
@@ -49,7 +50,7 @@ def test_the_reached_opening_is_the_one_that_carries_the_grasp_to_the_tcp(part: 
     phase = _phase(part)
     world = SceneWorld(load_scene("kitchen"))
     closed = world.handle_at(part, 0.0)
-    assert phase.t_grasp == 1.0 and phase.fraction == 1.0
+    assert phase.t_grasp == 1.0 and phase.fraction == 1.0 and phase.t_release == 4.8
     assert phase.reached(closed, world.handle_at(part, 0.6)) == pytest.approx(0.6, abs=0.002)
     assert phase.reached(closed, closed) == pytest.approx(0.0, abs=1e-9)
     assert phase.reached(closed, world.handle_at(part, 1.0)) == pytest.approx(1.0, abs=1e-9)

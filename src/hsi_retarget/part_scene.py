@@ -56,6 +56,8 @@ class PartPhase:
     meshes: Mapping[str, Any] | None = None  #: name -> closed-pose trimesh of the part and its riders
     motion: Callable[[float], NDArray[np.float64]] | None = None  #: opening [-] -> (4, 4) world motion
     contents: tuple[str, ...] = ()  #: the objects standing on the part (a drawer's), the task's included
+    #: [s] the holder lets go of the handle after opening it (its release keyframe; inf: unknown)
+    t_release: float = math.inf
 
     def shift(self) -> F64:
         """(4, 4) world motion from the part as scheduled (opening 1) to it at :attr:`fraction`: where
@@ -122,6 +124,7 @@ def opened_part(schedule: Schedule, spec: Any, exclude: tuple[str, ...] = ()) ->
     ]
     t_free = min(later) if later else math.inf
     reaches = [k.time for k in keys if k.hand == holder and k.action == "reach" and k.time <= min(opens)]
+    releases = [k.time for k in keys if k.hand == holder and k.contact_event == "release" and k.time > t_open]
     world = SceneWorld(spec)
     motion = world.part_transform(part, 1.0)
     meshes = scene_meshes(spec)
@@ -143,6 +146,7 @@ def opened_part(schedule: Schedule, spec: Any, exclude: tuple[str, ...] = ()) ->
         meshes=closed,
         motion=lambda f: world.part_transform(part, f),
         contents=tuple(o.name for o in spec.objects if support_of(spec, o.name).body == part),
+        t_release=float(min(releases)) if releases else math.inf,
     )
 
 

@@ -107,15 +107,19 @@ class RetargetConfig:
     correct_carry: bool = True
     #: A grasped free object is collision geometry of its hand until its release, kept
     #: :attr:`~hsi_retarget.ik.IKConfig.held_margin` from the scene (:mod:`hsi_retarget.held_object`;
-    #: needs a scene spec) [-]. Off by default: on the dual-arm benchmark (100 episodes) it fixed the
-    #: carry it was made for (a bottle caught under a cabinet top, 2 episodes gained) but lost 3 others
-    #: (77 vs 78 %), and the humanoid is not measured with it yet.
-    hold_objects: bool = False
+    #: needs a scene spec) [-]. ``None``: on for a floating base (the humanoid), off for a fixed one. On
+    #: the dual-arm benchmark (100 episodes) it fixed the carry it was made for (a bottle caught under a
+    #: cabinet top, 2 episodes gained) but lost 3 others (77 vs 78 %). On the humanoid's cabinet_bottle/reshape/2 the hand carrying
+    #: the bottle out of the cabinet trailed its path by up to 20 cm in MuJoCo without it.
+    hold_objects: bool | None = None
     #: [m] a grasp the IK missed by more than this holds nothing (the gripper closes beside the object)
     held_reach: float = 0.05
     #: An opened door or drawer stands, as an obstacle, as far open as the holder's IK took it, not as
     #: scheduled (:meth:`~hsi_retarget.part_scene.PartPhase.reached`) [-].
     reached_part: bool = True
+    #: While its holder swings it open or shut, the door or drawer is an obstacle of the rest of the robot,
+    #: posed as far as the holder's IK has taken it (:mod:`hsi_retarget.part_arcs`) [-].
+    moving_part: bool = True
 
     def __post_init__(self) -> None:
         if self.iterations_per_frame < 1 or self.initial_iterations < 1 or self.repair_iterations < 0:
@@ -280,7 +284,8 @@ def retarget(
     t1 = time.perf_counter()
     carried = motion.events if cfg.correct_carry else ()  # re-aimed from the reached grasp poses
     retrack = bool(windows)
-    objects = _object_meshes(scene, motion) if cfg.hold_objects else None
+    hold = cfg.hold_objects if cfg.hold_objects is not None else model.floating
+    objects = _object_meshes(scene, motion) if hold else None
     qs, pos_track, _, diag = track(
         goals, model, solver, cfg, part=part, events=carried, trace=retrack, objects=objects
     )

@@ -30,6 +30,7 @@ from hsi_retarget.humanoid_ik import Footsteps, plan_footsteps
 from hsi_retarget.ik import IKSolver, IKTargets
 from hsi_retarget.joint_trajectory import ContactEvent
 from hsi_retarget.mapping import RobotGoals, nominal_configuration
+from hsi_retarget.part_arcs import PartArcs
 from hsi_retarget.part_scene import PartPhase, follow_part
 from hsi_retarget.robots import RobotModel
 from hsi_retarget.scene_distance import SceneDistance
@@ -142,6 +143,7 @@ def track(
     start = 0
     posed: tuple[int, PartPhase] | None = None
     holds = _holds(goals.t, carries) if objects else []
+    arcs = PartArcs(part, goals.t, robot) if part is not None and cfg.moving_part else None
     held_log: list[dict[str, Any]] = []
     if resume is not None and resume[0] > 0:
         start, old = resume
@@ -173,6 +175,8 @@ def track(
                 goals = follow_part(goals, part, events)
                 versions.append((i, goals, list(corrections)))
         now = (None, "") if part is None else part.at(float(goals.t[i]))
+        if arcs is not None and arcs.holding(float(goals.t[i])):  # where the holder has taken it
+            now = arcs.at(i, qs)
         if now[0] is not layer[0] or now[1] != layer[1]:
             layer = now
             solver.set_part_scene(*layer)

@@ -1,0 +1,71 @@
+"""The door or drawer as an obstacle wherever its holder's IK has taken it (hsi_retarget.part_arcs)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from test_part_scene import DRAWER, _phase, _pull
+
+from hsi_planning.errors import ConfigError
+from hsi_planning.scene_paths import load_scene
+from hsi_planning.scheduler.world import SceneWorld
+from hsi_retarget.ik import IKSolver
+from hsi_retarget.part_arcs import PartArcs
+from hsi_retarget.retarget import RetargetConfig
+from hsi_retarget.robots import RobotModel
+from hsi_retarget.scene_distance import SceneDistance
+from hsi_retarget.tracking import track
+
+
+def test_the_drawer_is_posed_where_the_tracked_hand_has_pulled_it_while_the_hand_holds_it() -> None:
+    robot = RobotModel("dual_ur5e")
+    spec = load_scene("kitchen")
+    phase = _phase(DRAWER)  # held from 1 s (grasp) to 4.8 s (release)
+    goals = _pull(robot, 0.6)  # pulled to 0.6 of its travel between 1 s and 2 s
+    solver = IKSolver(robot, scene=SceneDistance.from_spec(spec, exclude=[DRAWER, "mug1"]))
+    qs = track(goals, robot, solver, RetargetConfig(), part=phase)[0]
+    arcs = PartArcs(phase, goals.t, robot)
+    world = SceneWorld(spec)
+    t = goals.t
+    assert arcs.at(int(np.argmax(t >= 0.5)), qs) == (None, "")  # before the grasp: not held
+    assert arcs.at(int(np.argmax(t >= 4.9)), qs) == (None, "")  # let go
+    for time, fraction in ((1.5, 0.3), (3.0, 0.6)):  # half way through the pull, then standing
+        i = int(np.argmax(t >= time))
+        scene, holder = arcs.at(i, qs)
+        assert scene is not None and holder == "right"
+        handle = world.handle_at(DRAWER, fraction)[None]
+        assert abs(float(scene.query(handle)[0][0])) < 0.02  # the handle is where the hand took it
+        farther = world.handle_at(DRAWER, fraction + 0.2)[None]
+        assert float(scene.query(farther)[0][0]) > 0.03  # not as far as scheduled
+    i = int(np.argmax(t >= 3.0))
+    assert arcs.at(i, qs)[0] is arcs.at(i + 1, qs)[0]  # the same rounded opening: the same scene
+
+
+def test_tracking_keeps_the_moving_part_only_with_moving_part_on() -> None:
+    robot = RobotModel("dual_ur5e")
+    spec = load_scene("kitchen")
+    phase = _phase(DRAWER)
+    goals = _pull(robot, 0.6)
+    solver = IKSolver(robot, scene=SceneDistance.from_spec(spec, exclude=[DRAWER, "mug1"]))
+    seen: list[object] = []
+    set_scene = solver.set_part_scene
+
+    def spy(scene: SceneDistance | None, holder: str = "") -> None:
+        seen.append(scene)
+        set_scene(scene, holder)
+
+    solver.set_part_scene = spy  # type: ignore[method-assign]
+    track(goals, robot, solver, RetargetConfig(), part=phase)
+    moving = {id(s) for s in seen if s is not None}
+    seen.clear()
+    track(goals, robot, solver, dataclasses.replace(RetargetConfig(), moving_part=False), part=phase)
+    standing = {id(s) for s in seen if s is not None}
+    assert len(standing) == 1  # the part standing open, one pose
+    assert len(moving) > 5  # posed anew as the hand pulls it
+
+
+def test_a_bad_rounding_step_is_refused() -> None:
+    with pytest.raises(ConfigError, match="step"):
+        PartArcs(_phase(DRAWER), np.arange(10) / 24.0, RobotModel("dual_ur5e"), step=0.0)
