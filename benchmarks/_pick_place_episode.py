@@ -14,7 +14,10 @@ what the robot's hold now, and one whose gripper events contradict what the hand
 door told to grasp the object) is not taken: the executed plan goes on. When the re-plan itself fails
 (the scheduler or an optimizer on the new layout), the executed schedule is retargeted again with the
 target's grasp re-aimed at its new place (``robot_trajectory(..., moved=...)``,
-:mod:`hsi_retarget.moved_target`) and joined the same way (``perturbation.reaimed`` counts these).
+:mod:`hsi_retarget.moved_target`) and joined the same way. So is it when the re-plan's IK misses a grasp
+or release of a free object by more than the arm-branch trigger (:func:`contact_miss`) and the re-aimed
+executed schedule misses less there (``perturbation.reaim_compared`` counts the comparisons,
+``perturbation.reaimed`` the re-aimed trajectories taken).
 Pushes are not re-planned (the controller recovers). The wrapper goes away when ``run_task`` takes a
 perturbation config.
 
@@ -160,6 +163,18 @@ def opening_hand(trajectory: Any, spec: SceneSpec, target: str) -> str:
     return ""
 
 
+def contact_miss(trajectory: Any) -> float:
+    """[m] the TCP errors summed over the free objects' grasps and releases of ``trajectory``'s retargeting
+    when its IK missed one by more than the arm-branch search's trigger (what is left after the search,
+    ``meta["arm_branches"]``), else 0: the grasps and releases are within reach of the gripper."""
+    report = trajectory.meta.get("arm_branches") or {}
+    if not report:
+        return 0.0
+    after = report.get("contact_error_after_m")
+    kept = bool(report.get("kept")) and after is not None
+    return float(after if kept else report.get("contact_error_before_m", math.inf))
+
+
 def grasping_hand(trajectory: Any, target: str) -> str:
     """The hand a trajectory grasps ``target`` with: ``left``, ``right``, ``both``, or '' (none)."""
     hands = sorted({e.hand for e in trajectory.events if e.kind == "grasp" and e.object_name == target})
@@ -194,7 +209,8 @@ def perturbed_execution(
 
     original = sim_check.execute
     task = demo_task(case)
-    record.update(events=[], replans=0, replan_wall_s=0.0, replan_errors=[], replan_ik_fps=[], reaimed=0)
+    record.update(events=[], replans=0, replan_wall_s=0.0, replan_errors=[], replan_ik_fps=[])
+    record.update(reaimed=0, reaim_compared=0)
     roles = {"hand": "", "door": ""}  #: the executed plan's grasping and opening hands, kept by a re-plan
 
     def hook(world: Any, event: Any, start: float) -> Any:
@@ -204,15 +220,23 @@ def perturbed_execution(
         try:
             spec = moved_object(case.spec, event.object_name, event.offset)
             replan = dataclasses.replace(task, hand=roles["hand"], door_hand=roles["door"])
+            moved = {event.object_name: np.asarray(event.offset, dtype=np.float64)}
             try:
                 new = _plan_trajectory(replan, spec, planner, cfg)
             except PlanningError as exc:  # the executed schedule, its grasp re-aimed at the moved target
                 if record.get("schedule") is None:
                     raise
                 record["replan_errors"].append(f"{type(exc).__name__}: {exc}")
-                moved = {event.object_name: np.asarray(event.offset, dtype=np.float64)}
                 new = robot_trajectory(record["schedule"], spec, cfg, moved=moved)
                 record["reaimed"] += 1
+            else:
+                miss = contact_miss(new)
+                if miss > 0.0 and record.get("schedule") is not None:  # the re-plan's IK misses a contact
+                    aimed = robot_trajectory(record["schedule"], spec, cfg, moved=moved)
+                    record["reaim_compared"] += 1
+                    if contact_miss(aimed) < miss:
+                        new = aimed
+                        record["reaimed"] += 1
             t_now = world.time - start
             held = {h: body for (h, body), eq in world.welds.items() if world.data.eq_active[eq]}
             joined = join(new, world.robot_q(), t_now, world, held)

@@ -116,7 +116,7 @@ def _reason(row: dict[str, Any]) -> str:
     first = (row.get("failures") or ["?"])[0]
     perturbation = row.get("perturbation") or {}
     replan = " (re-plan failed)" if perturbation.get("replan_errors") else ""
-    replan = " (re-plan failed, grasp re-aimed)" if perturbation.get("reaimed") else replan
+    replan = " (grasp re-aimed)" if perturbation.get("reaimed") else replan
     for word in ("placement", "collid", "opened", "limit", "fell", "grasp"):
         if word in first:
             return f"execute: {word}{replan}"

@@ -213,3 +213,21 @@ def test_a_replan_joins_where_its_hands_hold_what_they_hold_now(repo_root: Path)
     assert episode.holds_at(events, held.meta["replan_join_time_s"]) == {"right": door}
     with pytest.raises(RetargetError, match="never hold what they hold now"):
         episode.join(new, q_now, 2.0, world, {"left": door})  # the re-plan opens with the other hand
+
+
+def test_the_contact_miss_of_a_replan_is_what_its_arm_branch_search_left(repo_root: Path) -> None:
+    sys.path.insert(0, str(repo_root / "benchmarks"))
+    try:
+        import _pick_place_episode as episode
+    finally:
+        sys.path.remove(str(repo_root / "benchmarks"))
+
+    class _Traj:
+        def __init__(self, report: dict[str, object] | None) -> None:
+            self.meta = {} if report is None else {"arm_branches": report}
+
+    assert episode.contact_miss(_Traj(None)) == 0.0  # every grasp and release within the trigger
+    kept = {"kept": True, "contact_error_before_m": 0.3, "contact_error_after_m": 0.05}
+    assert episode.contact_miss(_Traj(kept)) == pytest.approx(0.05)
+    dropped = {"kept": False, "contact_error_before_m": 0.3, "contact_error_after_m": None}
+    assert episode.contact_miss(_Traj(dropped)) == pytest.approx(0.3)

@@ -110,7 +110,8 @@ def track(
     """Frame-by-frame IK of ``goals``: configurations (T, nq), TCP position [m] and orientation [rad] errors
     per side (T,) (NaN where inactive) and diagnostics (fallbacks, clearance, footsteps; with ``events``
     the re-aimed ``goals`` and their ``carry_corrections``). ``part``: an opened door or drawer kept clear
-    of while it stands open (:mod:`hsi_retarget.part_scene`). ``events``: contact events in the goals' time
+    of while it stands open (:mod:`hsi_retarget.part_scene`) and, with ``cfg.moving_part``, wherever the
+    holder's tracked hand has taken it while holding its handle (:mod:`hsi_retarget.part_arcs`). ``events``: contact events in the goals' time
     [s] whose carries are re-aimed from the TCP pose reached at their grasp as the IK gets there
     (:func:`~hsi_retarget.carry_correction.correct_carry`). ``arm``: arm configuration tasks
     (:mod:`hsi_retarget.arm_branch`). With ``cfg.reached_part`` the part is posed, at the first frame of
