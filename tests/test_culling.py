@@ -334,7 +334,7 @@ def test_an_opened_drawer_is_an_obstacle_while_it_stands_open_except_for_its_hol
     part = "drawer_unit1/drawer1"
 
     def key(t: float, hand: str, action: str, obj: str = "") -> SimpleNamespace:
-        return SimpleNamespace(time=t, hand=hand, action=action, object_name=obj)
+        return SimpleNamespace(time=t, hand=hand, action=action, object_name=obj, contact_event="")
 
     keys = [key(0.0, "right", "idle"), key(1.0, "right", "reach", part), key(1.5, "right", "open", part)]
     keys += [

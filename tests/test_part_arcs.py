@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pytest
 from test_part_scene import DRAWER, _phase, _pull
@@ -43,7 +41,7 @@ def test_the_drawer_is_posed_where_the_tracked_hand_has_pulled_it_while_the_hand
     assert arcs.at(i, qs)[0] is arcs.at(i + 1, qs)[0]  # the same rounded opening: the same scene
 
 
-def test_tracking_keeps_the_moving_part_only_with_moving_part_on() -> None:
+def test_the_moving_part_is_posed_anew_when_on_and_stands_still_by_default_on_a_fixed_base() -> None:
     robot = RobotModel("dual_ur5e")
     spec = load_scene("kitchen")
     phase = _phase(DRAWER)
@@ -57,10 +55,10 @@ def test_tracking_keeps_the_moving_part_only_with_moving_part_on() -> None:
         set_scene(scene, holder)
 
     solver.set_part_scene = spy  # type: ignore[method-assign]
-    track(goals, robot, solver, RetargetConfig(), part=phase)
+    track(goals, robot, solver, RetargetConfig(moving_part=True), part=phase)
     moving = {id(s) for s in seen if s is not None}
     seen.clear()
-    track(goals, robot, solver, dataclasses.replace(RetargetConfig(), moving_part=False), part=phase)
+    track(goals, robot, solver, RetargetConfig(), part=phase)  # default: off on a fixed base
     standing = {id(s) for s in seen if s is not None}
     assert len(standing) == 1  # the part standing open, one pose
     assert len(moving) > 5  # posed anew as the hand pulls it

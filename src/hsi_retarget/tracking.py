@@ -110,9 +110,10 @@ def track(
     """Frame-by-frame IK of ``goals``: configurations (T, nq), TCP position [m] and orientation [rad] errors
     per side (T,) (NaN where inactive) and diagnostics (fallbacks, clearance, footsteps; with ``events``
     the re-aimed ``goals`` and their ``carry_corrections``). ``part``: an opened door or drawer kept clear
-    of while it stands open (:mod:`hsi_retarget.part_scene`) and, with ``cfg.moving_part``, wherever the
-    holder's tracked hand has taken it while holding its handle (:mod:`hsi_retarget.part_arcs`). ``events``: contact events in the goals' time
-    [s] whose carries are re-aimed from the TCP pose reached at their grasp as the IK gets there
+    of while it stands open (:mod:`hsi_retarget.part_scene`) and, with ``cfg.moving_part`` (default: on a
+    floating base), wherever the holder's tracked hand has taken it while holding its handle
+    (:mod:`hsi_retarget.part_arcs`). ``events``: contact events in the goals' time [s] whose carries are
+    re-aimed from the TCP pose reached at their grasp as the IK gets there
     (:func:`~hsi_retarget.carry_correction.correct_carry`). ``arm``: arm configuration tasks
     (:mod:`hsi_retarget.arm_branch`). With ``cfg.reached_part`` the part is posed, at the first frame of
     its open interval, as far open as the holder took it (:meth:`~hsi_retarget.part_scene.PartPhase.reached`;
@@ -144,7 +145,8 @@ def track(
     start = 0
     posed: tuple[int, PartPhase] | None = None
     holds = _holds(goals.t, carries) if objects else []
-    arcs = PartArcs(part, goals.t, robot) if part is not None and cfg.moving_part else None
+    moving = cfg.moving_part if cfg.moving_part is not None else robot.floating
+    arcs = PartArcs(part, goals.t, robot) if part is not None and moving else None
     held_log: list[dict[str, Any]] = []
     if resume is not None and resume[0] > 0:
         start, old = resume
