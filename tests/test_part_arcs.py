@@ -4,12 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_part_scene import DRAWER, _phase, _pull
+from test_part_scene import DRAWER, _phase, _pulled_drawer
 
 from hsi_planning.errors import ConfigError
 from hsi_planning.scene_paths import load_scene
 from hsi_planning.scheduler.world import SceneWorld
-from hsi_retarget.ik import IKSolver
 from hsi_retarget.part_arcs import PartArcs
 from hsi_retarget.retarget import RetargetConfig
 from hsi_retarget.robots import RobotModel
@@ -18,14 +17,10 @@ from hsi_retarget.tracking import track
 
 
 def test_the_drawer_is_posed_where_the_tracked_hand_has_pulled_it_while_the_hand_holds_it() -> None:
-    robot = RobotModel("dual_ur5e")
-    spec = load_scene("kitchen")
-    phase = _phase(DRAWER)  # held from 1 s (grasp) to 4.8 s (release)
-    goals = _pull(robot, 0.6)  # pulled to 0.6 of its travel between 1 s and 2 s
-    solver = IKSolver(robot, scene=SceneDistance.from_spec(spec, exclude=[DRAWER, "mug1"]))
+    robot, phase, goals, solver = _pulled_drawer()  # held 1-4.8 s, pulled to 0.6 of its travel by 2 s
     qs = track(goals, robot, solver, RetargetConfig(), part=phase)[0]
     arcs = PartArcs(phase, goals.t, robot)
-    world = SceneWorld(spec)
+    world = SceneWorld(load_scene("kitchen"))
     t = goals.t
     assert arcs.at(int(np.argmax(t >= 0.5)), qs) == (None, "")  # before the grasp: not held
     assert arcs.at(int(np.argmax(t >= 4.9)), qs) == (None, "")  # let go
@@ -42,11 +37,7 @@ def test_the_drawer_is_posed_where_the_tracked_hand_has_pulled_it_while_the_hand
 
 
 def test_the_moving_part_is_posed_anew_when_on_and_stands_still_by_default_on_a_fixed_base() -> None:
-    robot = RobotModel("dual_ur5e")
-    spec = load_scene("kitchen")
-    phase = _phase(DRAWER)
-    goals = _pull(robot, 0.6)
-    solver = IKSolver(robot, scene=SceneDistance.from_spec(spec, exclude=[DRAWER, "mug1"]))
+    robot, phase, goals, solver = _pulled_drawer()
     seen: list[object] = []
     set_scene = solver.set_part_scene
 

@@ -97,12 +97,17 @@ def _pull(robot: RobotModel, fraction: float, n: int = 120) -> RobotGoals:
     )
 
 
-def test_tracking_poses_the_part_as_the_holder_took_it_and_a_resume_takes_that_pose() -> None:
+def _pulled_drawer() -> tuple[RobotModel, PartPhase, RobotGoals, IKSolver]:
+    """The dual arm, the drawer's phase (held from 1 s to 4.8 s), goals pulling it to 0.6 of its travel
+    between 1 s and 2 s (:func:`_pull`) and a solver of the kitchen without the drawer and mug1."""
     robot = RobotModel("dual_ur5e")
     spec = load_scene("kitchen")
-    phase = _phase(DRAWER)
-    goals = _pull(robot, 0.6)
     solver = IKSolver(robot, scene=SceneDistance.from_spec(spec, exclude=[DRAWER, "mug1"]))
+    return robot, _phase(DRAWER), _pull(robot, 0.6), solver
+
+
+def test_tracking_poses_the_part_as_the_holder_took_it_and_a_resume_takes_that_pose() -> None:
+    robot, phase, goals, solver = _pulled_drawer()
     cfg = RetargetConfig()
     first = track(goals, robot, solver, cfg, part=phase, trace=True)
     assert first[1]["right"][30:].max() < 0.01  # the hand followed the handle
