@@ -5,8 +5,9 @@ stands open as scheduled (from the end of its opening arc to the start of its cl
 opening. In MuJoCo, though, the part goes wherever the holder's hand takes it for as long as the hand has
 hold of the handle: through the opening and closing arcs, and wherever the hand drifts in between. The
 rest of the robot did not see it there: in humanoid ``cabinet_bottle/reshape/2`` a sole stood in the
-swinging door's way and the other hand, carrying the bottle out, was brushed by the panel as the door
-closed earlier than scheduled.
+swinging door's way and touched its panel in MuJoCo. :attr:`~hsi_retarget.retarget.RetargetConfig.moving_part`
+switches this on (by default on a floating base only: on the dual arm the reaching arm kept clear of the
+opening door and missed a bottle it had reached before).
 
 :class:`PartArcs` poses the part, on every frame from the holder's grasp of the handle
 (:attr:`~PartPhase.t_grasp`) to its release (:attr:`~PartPhase.t_release`; without one, as long as the
