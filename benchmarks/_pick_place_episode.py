@@ -221,18 +221,22 @@ def perturbed_execution(
             spec = moved_object(case.spec, event.object_name, event.offset)
             replan = dataclasses.replace(task, hand=roles["hand"], door_hand=roles["door"])
             moved = {event.object_name: np.asarray(event.offset, dtype=np.float64)}
+
+            def reaimed() -> Any:  # the executed schedule, its grasp re-aimed at the moved target
+                return robot_trajectory(record["schedule"], spec, cfg, moved=moved)
+
             try:
                 new = _plan_trajectory(replan, spec, planner, cfg)
-            except PlanningError as exc:  # the executed schedule, its grasp re-aimed at the moved target
+            except PlanningError as exc:
                 if record.get("schedule") is None:
                     raise
                 record["replan_errors"].append(f"{type(exc).__name__}: {exc}")
-                new = robot_trajectory(record["schedule"], spec, cfg, moved=moved)
+                new = reaimed()
                 record["reaimed"] += 1
             else:
                 miss = contact_miss(new)
                 if miss > 0.0 and record.get("schedule") is not None:  # the re-plan's IK misses a contact
-                    aimed = robot_trajectory(record["schedule"], spec, cfg, moved=moved)
+                    aimed = reaimed()
                     record["reaim_compared"] += 1
                     if contact_miss(aimed) < miss:
                         new = aimed

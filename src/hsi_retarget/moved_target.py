@@ -1,7 +1,8 @@
 """Grasps of objects that moved after planning, re-aimed at where they are now.
 
 When a target is pushed a few cm after its grasp was planned and the re-plan on the new layout fails (a
-scheduler check at the new spot, an optimizer out of iterations), the planned motion can still be used:
+scheduler check at the new spot, an optimizer out of iterations) or its IK misses the grasp, the planned
+motion can still be used:
 :func:`shift_grasps` moves the grasping hand's wrist goals by the object's displacement, eased in over the
 planned approach into the grasp (the straight final approach of :mod:`hsi_retarget.grasp_depth` is laid
 out from the moved goal), held through the withdrawal after it, and eased out over the carry up to the

@@ -24,7 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hsi_planning.errors import ConfigError
-from hsi_retarget.part_scene import PartPhase
+from hsi_retarget.part_scene import HandleArc, PartPhase
 from hsi_retarget.robots import RobotModel
 from hsi_retarget.scene_distance import SceneDistance
 
@@ -48,7 +48,7 @@ class PartArcs:
         self._robot = robot
         self._frame = robot.tcp_frames.get(part.holder) if part.holder else None
         self._grasp = int(np.searchsorted(self._t, part.t_grasp, side="right")) - 1
-        self._at_grasp: tuple[bytes, F64] | None = None  # (configuration at the grasp, its holder TCP)
+        self._arc: tuple[bytes, HandleArc] | None = None  # (configuration at the grasp, its TCP's arc)
         self._posed: dict[int, SceneDistance] = {}
 
     def holding(self, time: float) -> bool:
@@ -65,10 +65,12 @@ class PartArcs:
         if not self.holding(float(self._t[i])) or not 0 <= self._grasp <= i - 1 < qs.shape[0]:
             return None, ""
         start = qs[self._grasp]
-        if self._at_grasp is None or self._at_grasp[0] != start.tobytes():
-            self._at_grasp = (start.tobytes(), self._robot.fk(start, (frame,))[frame][:3, 3])
+        if self._arc is None or self._arc[0] != start.tobytes():
+            at_grasp = self._robot.fk(start, (frame,))[frame][:3, 3]
+            self._arc = (start.tobytes(), HandleArc(part.motion, at_grasp))
         now = self._robot.fk(qs[i - 1], (frame,))[frame][:3, 3]
-        key = round(part.reached(self._at_grasp[1], now) / self.step)
+        opening = self._arc[1].nearest(now) if np.isfinite(now).all() else part.fraction
+        key = round(opening / self.step)
         scene = self._posed.get(key)
         if scene is None:
             scene = self._posed[key] = part.posed(min(key * self.step, 1.0)).scene

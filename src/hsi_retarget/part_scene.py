@@ -88,19 +88,41 @@ class PartPhase:
         grasp, target = np.asarray(tcp_at_grasp, dtype=float), np.asarray(tcp_at_open, dtype=float)
         if not (np.isfinite(grasp).all() and np.isfinite(target).all()):
             return self.fraction
-
-        def miss(f: float) -> float:
-            m = self.motion(f)  # type: ignore[misc]
-            return float(np.linalg.norm(m[:3, :3] @ grasp + m[:3, 3] - target))
-
-        best = min(np.linspace(0.0, 1.0, 51), key=miss)  # then refine within a grid step
-        return float(min(np.clip(best + np.linspace(-0.02, 0.02, 21), 0.0, 1.0), key=miss))
+        return HandleArc(self.motion, grasp).nearest(target)
 
     def at(self, t: float) -> tuple[SceneDistance | None, str]:
         """The extra scene and its exempt hand at time ``t`` [s] (``None`` outside the open interval)."""
         if not self.t_open <= t < self.t_close:
             return None, ""
         return self.scene, self.holder if t < self.t_free else ""
+
+
+class HandleArc:
+    """The path of a TCP that holds the part at ``grasp`` (3,) [m] (its pose with the part closed) as
+    ``motion`` (opening [0..1] -> (4, 4) world motion) opens it; its points are computed once, for many
+    :meth:`nearest` calls (a part posed on every frame, :mod:`hsi_retarget.part_arcs`)."""
+
+    def __init__(self, motion: Callable[[float], F64], grasp: F64) -> None:
+        self._motion = motion
+        self._grasp = np.array(grasp, dtype=np.float64)
+        self._points: dict[float, F64] = {}
+
+    def _at(self, fraction: float) -> F64:
+        point = self._points.get(fraction)
+        if point is None:
+            m = self._motion(fraction)
+            point = self._points[fraction] = m[:3, :3] @ self._grasp + m[:3, 3]
+        return point
+
+    def nearest(self, target: F64) -> float:
+        """The opening [0..1] whose TCP is nearest to ``target`` (3,) [m]: the best of 51 evenly spaced,
+        refined within a grid step."""
+
+        def miss(f: float) -> float:
+            return float(np.linalg.norm(self._at(f) - target))
+
+        best = min(np.linspace(0.0, 1.0, 51), key=miss)
+        return float(min(np.clip(best + np.linspace(-0.02, 0.02, 21), 0.0, 1.0), key=miss))
 
 
 def opened_part(schedule: Schedule, spec: Any, exclude: tuple[str, ...] = ()) -> PartPhase | None:
