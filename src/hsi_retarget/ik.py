@@ -57,6 +57,9 @@ class IKConfig:
     contact_position_factor: float = 10.0
     contact_orientation_factor: float = 30.0
     contact_root_factor: float = 1.5  #: [-] root goal weight factor there (the base follows less)
+    #: [-] factor on ``root_weight`` for a floating base's roll and pitch (the pelvis goal is level):
+    #: below 1 the pelvis tilts over the hips where the hands reach low and far
+    root_tilt_factor: float = 0.1
     #: [-] TCP weight factor (on top of the contact factors) of a hand holding an opened door's or drawer's
     #: handle (:attr:`IKTargets.holding`): the part follows that hand, a near-closed chain
     hold_factor: float = 10.0
@@ -115,6 +118,7 @@ class IKConfig:
                 raise ConfigError(f"IKConfig.{name} must be > 0, got {getattr(self, name)}")
         for name in (
             "root_weight",
+            "root_tilt_factor",
             "lift_weight",
             "posture_weight",
             "damping",
@@ -248,6 +252,7 @@ class IKSolver:
         self._w_tcp = np.repeat([cfg.position_weight, cfg.orientation_weight], 3)  #: (6,) TCP task weights
         #: (6,) TCP weight factors at a contact, minus 1
         self._contact_gain = np.repeat([cfg.contact_position_factor, cfg.contact_orientation_factor], 3) - 1.0
+        self._root_axes = np.array([1.0, 1.0, 1.0, cfg.root_tilt_factor, cfg.root_tilt_factor, 1.0])
         free = [j for j in (*BASE_JOINTS, LIFT_JOINT) if j in robot.joint_names]
         self._posture_w[[robot.v_index(j) for j in free]] = 0.0
         if robot.floating:
@@ -310,7 +315,7 @@ class IKSolver:
             if self.robot.floating:
                 jacs.append(self._frame_jacobian(self._pelvis))
                 errs.append(self._pose_error(self._pelvis, goal))
-                weights.append(np.full(6, root_weight))
+                weights.append(root_weight * self._root_axes)
             elif self._base_v:
                 yaw = math.atan2(goal[1, 0], goal[0, 0])
                 err = np.array([goal[0, 3], goal[1, 3], yaw]) - q[self._base_q]
