@@ -254,6 +254,33 @@ def test_humanoid_side_grasp_with_the_forearm_about_neutral(robots: dict[str, Ro
         assert abs(result.q[robot.q_index(f"{side}_wrist_yaw")]) < 0.2  # of +-1.4 rad
 
 
+def test_a_humanoid_hinges_at_the_hips_to_reach_low_and_far(robots: dict[str, RobotModel]) -> None:
+    """Both hands 0.7 m in front at 0.45 m height (feet planted, a level pelvis goal): with the pelvis tilt
+    weighted at ``root_tilt_factor`` 0.1 the pelvis tilts forward over the hips and the hands get closer
+    than with the tilt weighted as the rest of the pelvis goal, the CoM staying over the feet."""
+    robot = robots["humanoid"]
+    feet, root = _feet(robot), _root(robot)
+    tcp = {}
+    for side, y in (("left", 0.15), ("right", -0.15)):
+        goal = robot.frame_pose(robot.q_home, robot.tcp_frames[side])
+        goal[:3, 3] = (0.7, y, 0.45)
+        tcp[side] = goal
+    reach, tilt = {}, {}
+    for factor in (1.0, 0.1):
+        solver = IKSolver(robot, IKConfig(root_tilt_factor=factor))
+        result = solver.solve(robot.q_home, IKTargets(tcp=tcp, root=root, feet=feet))
+        reach[factor] = max(result.position_error.values())
+        tilt[factor] = np.degrees(np.arccos(robot.frame_pose(result.q, "pelvis")[2, 2]))
+        fk = robot.fk(result.q, ("left_sole", "right_sole"))
+        for side in SIDES:
+            assert np.linalg.norm(fk[f"{side}_sole"][:3, 3] - feet[side][:3, 3]) < 1e-3
+        assert com_inside(_com(robot, result.q)[:2], list(feet.values()), SupportConfig(), tol=1e-4)
+    assert reach[0.1] < 0.7 * reach[1.0], reach
+    assert tilt[0.1] > 5.0 > tilt[1.0] + 2.0, tilt
+    with pytest.raises(ConfigError, match="root_tilt_factor"):
+        IKConfig(root_tilt_factor=-0.1)
+
+
 def _walking_pelvis(robot: RobotModel, x: np.ndarray) -> np.ndarray:
     """(T, 4, 4) upright pelvis goals at the home height, at forward positions ``x`` (T,) [m]."""
     pelvis = np.tile(np.eye(4), (x.shape[0], 1, 1))

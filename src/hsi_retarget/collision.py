@@ -55,6 +55,7 @@ class SphereSet:
         tips: (S,) True for finger spheres.
         proximal: (S,) True for upper-arm spheres (no arm-vs-body pairs).
         fixed: (S,) True for spheres on an arm's mount (no joint: no pairs with the other arm's mount).
+        palm: (S,) True for spheres on a gripper link (the fingers' parent).
     """
 
     frame_ids: I64
@@ -65,6 +66,7 @@ class SphereSet:
     tips: NDArray[np.bool_]
     proximal: NDArray[np.bool_]
     fixed: NDArray[np.bool_]
+    palm: NDArray[np.bool_]
 
     @functools.cached_property
     def everyone(self) -> NDArray[np.bool_]:
@@ -264,7 +266,7 @@ def robot_spheres(robot: RobotModel, max_per_axis: int = 12) -> SphereSet:
         selected += [(n, "body") for n in sorted(legs)]
     finger_links = {link.name for link in desc.links if any(j.name in finger_joints for j in link.joints)}
     palms = {links[n].parent for n in finger_links}
-    frame_ids, frames, centers, radii, groups, tips, proximal, fixed = [], [], [], [], [], [], [], []
+    frame_ids, frames, centers, radii, groups, tips, proximal, fixed, palm = [], [], [], [], [], [], [], [], []
     for name, group in selected:
         finger = name in finger_links
         for geom in links[name].geoms:
@@ -275,6 +277,7 @@ def robot_spheres(robot: RobotModel, max_per_axis: int = 12) -> SphereSet:
                 tips.append(finger)
                 proximal.append(name in upper)
                 fixed.append(name in upper and not links[name].joints)
+                palm.append(name in palms)
                 frame_ids.append(robot.model.getFrameId(name, pin.FrameType.BODY))
                 frames.append(name)
                 centers.append(centre)
@@ -291,6 +294,7 @@ def robot_spheres(robot: RobotModel, max_per_axis: int = 12) -> SphereSet:
         np.array(tips, dtype=bool),
         np.array(proximal, dtype=bool),
         np.array(fixed, dtype=bool),
+        np.array(palm, dtype=bool),
     )
 
 

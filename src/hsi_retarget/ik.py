@@ -8,8 +8,9 @@ One step solves, for the joint step ``dq`` (tangent space, the gripper fingers e
          (humanoid) J_sole dq = e_sole, CoM inside the support polygon  (:mod:`hsi_retarget.humanoid_ik`)
 
 with the tasks: both TCP poses (position weight >> orientation weight), the root goal (dual arm: planar
-base x, y, yaw; humanoid: pelvis pose) and the torso lift. Position limits are velocity bounds, so a step
-never leaves the limits. When the constrained QP is infeasible (e.g. a step starting inside a margin), it
+base x, y, yaw; humanoid: pelvis pose, its roll and pitch weighted less so that the body hinges at the
+hips to reach low) and the torso lift. Position limits are velocity bounds, so a step never leaves the
+limits. When the constrained QP is infeasible (e.g. a step starting inside a margin), it
 is retried with the inequality rows relaxed to "do not get closer", then also with the feet's equality
 rows turned into stiff tasks (a swing foot that would have to bring a thigh closer to a cabinet than it
 is, or the CoM back into its polygon, cannot make the step infeasible: standing still is feasible), and
@@ -361,8 +362,8 @@ class IKSolver:
 
     def set_part_scene(self, scene: SceneDistance | None, holder: str = "") -> None:
         """Check the robot against one more ``scene`` (e.g. an opened door or drawer) from now on, except
-        the spheres of the ``holder`` side (the hand holding it, ``left``/``right``; '' none); ``None``
-        removes it."""
+        the gripper and finger spheres of the ``holder`` side (the hand holding it, ``left``/``right``;
+        '' none: its arm keeps clear of the part like any other); ``None`` removes it."""
         if scene is None:
             self._layer, self._layer_holder = None, ""
             return
@@ -370,7 +371,8 @@ class IKSolver:
             raise RetargetError(f"set_part_scene: holder must be 'left', 'right' or '', got {holder!r}")
         heed = np.ones(self.spheres.radii.shape[0], dtype=bool)
         if holder:
-            heed &= self.spheres.groups != GROUPS.index(holder)
+            hand = self.spheres.tips | self.spheres.palm
+            heed &= ~((self.spheres.groups == GROUPS.index(holder)) & hand)
         self._layer, self._layer_holder = (scene, heed), holder
 
     def hold(self, held: HeldObject) -> None:
