@@ -357,8 +357,15 @@ def test_an_opened_drawer_is_an_obstacle_while_it_stands_open_except_for_its_hol
     robot = RobotModel("dual_ur5e")
     solver = IKSolver(robot, IKConfig(), SceneDistance.from_spec(spec, exclude=[part]))
     solver.set_part_scene(phase.scene, "right")
-    assert solver._layer is not None and not solver._layer[1][solver.spheres.of("right")].any()
-    assert solver._layer[1][solver.spheres.of("left")].all()
+    assert solver._layer is not None
+    heed, spheres = solver._layer[1], solver.spheres
+    right = np.zeros(spheres.radii.shape[0], dtype=bool)
+    right[spheres.of("right")] = True
+    hand = spheres.tips | spheres.palm
+    assert not heed[right & hand].any()  # the holding hand closes on the part's handle
+    arm = [spheres.frames[i] for i in np.flatnonzero(right & heed)]
+    assert {"right_upper_arm_link", "right_forearm_link"} <= set(arm)  # its arm keeps clear of the part
+    assert heed[spheres.of("left")].all()
     with pytest.raises(RetargetError, match="holder"):
         solver.set_part_scene(phase.scene, "middle")
     assert opened_part(SimpleNamespace(info={}, keyframes=keys), spec) is None  # type: ignore[arg-type]

@@ -13,7 +13,8 @@ opening door and missed a bottle it had reached before).
 (:attr:`~PartPhase.t_grasp`) to its release (:attr:`~PartPhase.t_release`; without one, as long as the
 part stands open in :class:`PartPhase`), as far open as the holder's tracked TCP had taken it by the frame
 before (:meth:`PartPhase.reached` between the TCP at the grasp and there), rounded to ``step`` so that a
-few posed scenes serve many frames. The holder's spheres stay exempt, as while the part stands open.
+few posed scenes serve many frames. The holder's gripper and fingers stay exempt, as while the part stands
+open.
 """
 
 from __future__ import annotations

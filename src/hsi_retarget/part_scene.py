@@ -3,9 +3,9 @@
 The retargeting's scene leaves out every part a schedule touches (it moves). Between the end of its
 opening arc and the start of its closing arc, the part stands still at its opened pose: there it is put
 back, opened, as an extra collision scene (:meth:`~hsi_retarget.ik.IKSolver.set_part_scene`), with the
-objects that ride in it (a drawer's contents) moved along. The hand that opened it is exempt while it
-still holds the handle; every other sphere (the reaching hand, the arm over a drawer's front) keeps its
-margin to it.
+objects that ride in it (a drawer's contents) moved along. The gripper and fingers of the hand that
+opened it are exempt while it still holds the handle; every other sphere (the reaching hand, the arm
+over a drawer's front, the holder's own forearm and upper arm) keeps its margin to it.
 
 The part stands where the robot's hand actually took it, not where the schedule meant it to: a hand that
 pulled a drawer short leaves it short. :meth:`PartPhase.reached` finds the opening [0..1] that carries
