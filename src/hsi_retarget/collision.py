@@ -266,7 +266,8 @@ def robot_spheres(robot: RobotModel, max_per_axis: int = 12) -> SphereSet:
         selected += [(n, "body") for n in sorted(legs)]
     finger_links = {link.name for link in desc.links if any(j.name in finger_joints for j in link.joints)}
     palms = {links[n].parent for n in finger_links}
-    frame_ids, frames, centers, radii, groups, tips, proximal, fixed, palm = [], [], [], [], [], [], [], [], []
+    frame_ids, frames, centers, radii, groups = [], [], [], [], []
+    tips, proximal, fixed, palm = [], [], [], []
     for name, group in selected:
         finger = name in finger_links
         for geom in links[name].geoms:
