@@ -30,6 +30,7 @@ from hsi_planning.errors import ConfigError, RetargetError
 from hsi_retarget.candidates import CandidateCache
 from hsi_retarget.collision import GROUPS, SceneLayer, collision_rows, min_gap, robot_spheres
 from hsi_retarget.culling import LinkBounds
+from hsi_retarget.face_planes import FacePlanes
 from hsi_retarget.held_object import HeldObject, held_rows
 from hsi_retarget.humanoid_ik import SupportConfig, support_rows
 from hsi_retarget.mapping import BASE_JOINTS, LIFT_JOINT
@@ -101,6 +102,10 @@ class IKConfig:
     #: [m] extra reach of the culled collision candidates, reused until a sphere moved half of it
     #: (:mod:`hsi_retarget.candidates`; the same rows, cheaper); 0: culled anew at every query
     candidate_slack: float = 0.05
+    #: [-] also hold each sphere off the face plane it was inside its margin of at the step before
+    #: (:mod:`hsi_retarget.face_planes`: no chatter between two faces at a furniture edge); ``None``: on
+    #: for a floating base (measured there: a humanoid's head under a shelf board), off on a fixed one
+    face_planes: bool | None = None
 
     def __post_init__(self) -> None:
         positive = ("position_weight", "orientation_weight", "max_step", "position_tolerance")
@@ -245,6 +250,8 @@ class IKSolver:
         self._body_extra = np.where(body, extra, 0.0) if extra > 0.0 and body.any() else None
         slack = self.config.candidate_slack
         self._cache = CandidateCache(slack) if slack > 0.0 else None
+        planes = cfg.face_planes if cfg.face_planes is not None else floating
+        self._planes = FacePlanes(self.spheres) if planes and scene is not None else None
         self._world_memo: dict[bytes, tuple[F64, F64]] = {}
         self._v_max = np.array(robot.v_max)
         self._jq = np.array([robot.q_index(n) for n in robot.joint_names], dtype=np.int64)
@@ -479,7 +486,15 @@ class IKSolver:
         lower[idx_v] = np.maximum(lower[idx_v], lo_q - q[idx_q])
         upper[idx_v] = np.minimum(upper[idx_v], hi_q - q[idx_q])
         upper = np.maximum(upper, lower)
-        rows, row_lo, min_slack = self._collision_rows(q, self._extra_margin(targets))
+        extra = self._extra_margin(targets)
+        rows, row_lo, min_slack = self._collision_rows(q, extra)
+        if self._planes is not None and self.scene is not None:
+            centers = self._world(q, posed=True)[1]
+            margin = np.where(self.spheres.tips, self.margins[1], self.margins[0])
+            margin = margin + extra if extra is not None else margin
+            more, more_lo = self._planes.rows(self._model, self._data, centers, margin, cfg.collision_gain)
+            rows, row_lo = np.vstack([rows, more]), np.concatenate([row_lo, more_lo])
+            self._planes.remember(self.scene, centers, margin)
         if self._held:
             more, more_lo = self._held_rows(targets)
             rows, row_lo = np.vstack([rows, more]), np.concatenate([row_lo, more_lo])
