@@ -575,3 +575,45 @@ def test_an_infeasible_foot_row_softens_before_the_collision_rows_go() -> None:
     assert without_foot[1] and without_foot[2] == 1 and without_foot[0][0] == pytest.approx(0.0, abs=1e-9)
     feasible = solve_cascade(hess, grad, rows, (np.array([-0.05, 0.05]), np.array([np.inf, 0.05])), box)
     assert feasible[2] == 0 and feasible[0] == pytest.approx([-0.05, 0.05], abs=1e-9)
+
+
+def test_face_planes_hold_a_sphere_off_the_face_it_was_inside_the_margin_of(
+    robots: dict[str, RobotModel],
+) -> None:
+    """A board 1 cm over the humanoid's head: the head's plane is the board's underside; the next step
+    gets a row pushing it down by ``gain`` of its depth in the margin, and none once it has moved away."""
+    import trimesh
+
+    from hsi_retarget.face_planes import FacePlanes
+
+    robot = robots["humanoid"]
+    solver = IKSolver(robot)
+    q = np.array(robot.q_home)
+    centers = solver.sphere_centers(q)
+    head = np.flatnonzero(np.array(solver.spheres.frames) == "head")
+    top = int(head[np.argmax(centers[head, 2] + solver.spheres.radii[head])])
+    board = trimesh.creation.box(extents=(0.6, 0.6, 0.02))
+    board.apply_translation(centers[top] + [0.0, 0.0, solver.spheres.radii[top] + 0.01 + 0.01])
+    scene = SceneDistance({"board": board}, ground=())
+    margin = np.full(centers.shape[0], 0.04)
+    planes = FacePlanes(solver.spheres, reach=0.05)
+    dist, normal = scene.query(centers)
+    gap = dist - solver.spheres.radii - margin
+    inside = np.flatnonzero(gap < 0.0)
+    planes.remember(centers, margin, inside, gap[inside], normal[inside])
+    data = robot.model.createData()
+    pin.computeJointJacobians(robot.model, data, q)
+    pin.updateFramePlacements(robot.model, data)
+    rows, lower = planes.rows(robot.model, data, centers, margin, gain=0.5)
+    assert rows.shape == (lower.shape[0], robot.nv) and lower.shape[0] >= 1
+    assert lower.max() == pytest.approx(0.5 * (0.04 - 0.01), abs=1e-4)  # 1 cm below the underside
+    dq = np.zeros(robot.nv)
+    dq[robot.v_index("waist_pitch")] = 0.1  # bending forward lowers the head: away from the underside
+    assert (rows @ dq)[np.argmax(lower)] > 0.0
+    moved = centers - np.array([0.0, 0.0, 0.2])  # far from where the planes were taken: no rows
+    assert planes.rows(robot.model, data, moved, margin, gain=0.5)[0].shape[0] == 0
+    planes.clear()
+    assert planes.rows(robot.model, data, centers, margin, gain=0.5)[0].shape[0] == 0
+    assert IKSolver(robot, scene=scene)._planes is not None  # on for a floating base
+    assert IKSolver(robots["dual_ur5e"], scene=scene)._planes is None  # off on a fixed one
+    assert IKSolver(robots["dual_ur5e"], IKConfig(face_planes=True), scene=scene)._planes is not None

@@ -315,6 +315,7 @@ def collision_rows(
     cache: CandidateCache | None = None,
     extra_margin: F64 | None = None,
     world: tuple[F64, F64] | None = None,
+    inside: list[tuple[I64, F64, F64]] | None = None,
 ) -> tuple[F64, F64, float]:
     """Linearized clearance constraints ``A dq >= lower`` for one IK step.
 
@@ -328,8 +329,9 @@ def collision_rows(
     ``extra`` = (scene, spheres (S,) that heed it): one more scene, e.g. an opened door that one hand
     holds. ``cache`` keeps the culled candidates across calls (:mod:`hsi_retarget.candidates`; same
     result). ``extra_margin`` (S,) [m], >= 0: more scene margin per sphere. ``world``: ``bounds.world`` of
-    ``data`` when already computed. Returns A (k, nv), lower (k,) and the smallest gap [m] (``inf`` without
-    candidates).
+    ``data`` when already computed. ``inside``: gets (spheres, gaps [m] (negative), unit normals (., 3)) of
+    the sphere-scene candidates inside their margin, all of them. Returns A (k, nv), lower (k,) and the
+    smallest gap [m] (``inf`` without candidates).
     """
     links: F64 | None
     if world is not None and bounds is not None:
@@ -349,6 +351,9 @@ def collision_rows(
         cache=cache,
         extra_margin=extra_margin,
     )
+    if inside is not None:
+        deep = (ib < 0) & (gaps < 0.0)
+        inside.append((ia[deep], gaps[deep], dirs[deep]))
     if gaps.size == 0:
         return np.zeros((0, model.nv)), np.zeros(0), math.inf
     if max_rows <= 0:  # no rows asked for: the smallest gap is still reported

@@ -7,9 +7,10 @@ sphere out along one face's normal and, unconstrained along the other, back towa
 humanoid's head below a shelf board stayed 1-2 cm from it for a second this way, inside its 4 cm margin.
 
 :class:`FacePlanes` remembers, after each step, the plane through the closest point of every sphere inside
-its margin, and gives the next step a row for it as well (a velocity damper on the distance to that
-plane, like the scene rows). Only the step right after is constrained, and only while the sphere stays
-within ``reach`` of where it was: a plane describes the face near its point, not the whole scene.
+its margin (from the step's collision candidates: no extra distance query), and gives the next step a row
+for it as well (a velocity damper on the distance to that plane, like the scene rows). Only the step
+right after is constrained, and only while the sphere stays within ``reach`` of where it was: a plane
+describes the face near its point, not the whole scene.
 """
 
 from __future__ import annotations
@@ -19,7 +20,6 @@ import pinocchio as pin
 from numpy.typing import NDArray
 
 from hsi_retarget.collision import SphereSet, _point_rows
-from hsi_retarget.scene_distance import SceneDistance
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
@@ -41,16 +41,20 @@ class FacePlanes:
         """Forget the planes (a new scene)."""
         self._idx = np.zeros(0, dtype=np.int64)
 
-    def remember(self, scene: SceneDistance, centers: F64, margin: F64) -> None:
-        """Take the planes of the spheres with centres ``centers`` (S, 3) [m] closer to ``scene`` than
-        their ``margin`` (S,) [m]."""
-        dist, normal = scene.query(centers, self.spheres.grounded)
-        gap = dist - self.spheres.radii
-        inside = np.flatnonzero(gap < margin)
-        self._idx = inside.astype(np.int64)
-        self._normal = normal[inside]
-        self._point = centers[inside] - dist[inside, None] * normal[inside]
-        self._center = centers[inside].copy()
+    @property
+    def nothing(self) -> tuple[I64, F64, F64]:
+        """No sphere inside its margin (the arguments of :meth:`remember` after ``centers, margin``)."""
+        return np.zeros(0, dtype=np.int64), np.zeros(0), np.zeros((0, 3))
+
+    def remember(self, centers: F64, margin: F64, idx: I64, gap: F64, normal: F64) -> None:
+        """Take the planes of the spheres ``idx`` (k,) that are ``gap`` (k,) [m] (negative) inside their
+        ``margin`` (S,) [m] of the scene along ``normal`` (k, 3) (the collision candidates of the step;
+        ``centers`` (S, 3) [m] the sphere centres)."""
+        dist = gap + self.spheres.radii[idx] + margin[idx]
+        self._idx = np.asarray(idx, dtype=np.int64).copy()
+        self._normal = np.array(normal, dtype=np.float64)
+        self._point = centers[idx] - dist[:, None] * self._normal
+        self._center = centers[idx].copy()
 
     def rows(
         self, model: pin.Model, data: pin.Data, centers: F64, margin: F64, gain: float

@@ -40,6 +40,7 @@ from hsi_retarget.robots import RobotModel
 from hsi_retarget.scene_distance import SceneDistance
 
 F64 = NDArray[np.float64]
+I64 = NDArray[np.int64]
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 _WORLD_MEMO = 4  #: [-] configurations whose sphere centres :meth:`IKSolver._world` keeps
 _STIFF = 1e4  #: [-] weight of the feet's equality rows turned into tasks (:func:`solve_cascade`)
@@ -251,7 +252,7 @@ class IKSolver:
         slack = self.config.candidate_slack
         self._cache = CandidateCache(slack) if slack > 0.0 else None
         planes = cfg.face_planes if cfg.face_planes is not None else floating
-        self._planes = FacePlanes(self.spheres) if planes and scene is not None else None
+        self._planes = FacePlanes(self.spheres) if planes else None
         self._world_memo: dict[bytes, tuple[F64, F64]] = {}
         self._v_max = np.array(robot.v_max)
         self._jq = np.array([robot.q_index(n) for n in robot.joint_names], dtype=np.int64)
@@ -441,9 +442,12 @@ class IKSolver:
                 extra[tips] = self._tip_span * (1.0 - targets.contact.get(side, 0.0))
         return extra
 
-    def _collision_rows(self, q: F64, extra: F64 | None = None) -> tuple[F64, F64, float]:
+    def _collision_rows(
+        self, q: F64, extra: F64 | None = None, inside: list[tuple[I64, F64, F64]] | None = None
+    ) -> tuple[F64, F64, float]:
         """Rows A (k, nv) and lower bounds (k,) of the closest sphere pairs; smallest clearance - margin
-        (``extra`` (S,) [m]: more scene margin per sphere)."""
+        (``extra`` (S,) [m]: more scene margin per sphere; ``inside``: see
+        :func:`~hsi_retarget.collision.collision_rows`)."""
         cfg = self.config
         pairs, margins = self._checked()
         return collision_rows(
@@ -461,6 +465,7 @@ class IKSolver:
             cache=self._cache,
             extra_margin=extra,
             world=self._world(q, posed=True),
+            inside=inside,
         )
 
     # ------------------------------------------------------------------------------------ solving
@@ -487,14 +492,15 @@ class IKSolver:
         upper[idx_v] = np.minimum(upper[idx_v], hi_q - q[idx_q])
         upper = np.maximum(upper, lower)
         extra = self._extra_margin(targets)
-        rows, row_lo, min_slack = self._collision_rows(q, extra)
-        if self._planes is not None and self.scene is not None:
+        inside: list[tuple[I64, F64, F64]] | None = None if self._planes is None else []
+        rows, row_lo, min_slack = self._collision_rows(q, extra, inside)
+        if self._planes is not None:
             centers = self._world(q, posed=True)[1]
             margin = np.where(self.spheres.tips, self.margins[1], self.margins[0])
             margin = margin + extra if extra is not None else margin
             more, more_lo = self._planes.rows(self._model, self._data, centers, margin, cfg.collision_gain)
             rows, row_lo = np.vstack([rows, more]), np.concatenate([row_lo, more_lo])
-            self._planes.remember(self.scene, centers, margin)
+            self._planes.remember(centers, margin, *(inside[0] if inside else self._planes.nothing))
         if self._held:
             more, more_lo = self._held_rows(targets)
             rows, row_lo = np.vstack([rows, more]), np.concatenate([row_lo, more_lo])
