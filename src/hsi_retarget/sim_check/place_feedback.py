@@ -20,9 +20,9 @@ passes the scene). It never pushes the object down (it may lift it) and is bound
 report records the largest shift). The arm joints take it through the damped inverse of the TCP Jacobian
 with the orientation kept (``dq = J^T (J J^T + damping^2 I)^-1 [shift; 0]``; both hands of a two-handed
 carry), clipped to the joint limits. After the release the shift is held for ``hold_s`` (the fingers open
-around the object) and eased out over ``ease_s``. The corrected path is not collision-checked: a shift is
-centimetres, and the IK kept margins to the scene. What the TCP lags its command at the release (the
-humanoid's pelvis leaning) is not corrected.
+around the object) and eased out over ``ease_s``. The shifted hand keeps ``clearance_m`` to the furniture
+(:mod:`hsi_retarget.sim_check.shift_guard`: the shift loses its part towards a nearby wall). What the TCP
+lags its command at the release (the humanoid's pelvis leaning) is not corrected.
 """
 
 from __future__ import annotations
@@ -38,6 +38,7 @@ from hsi_planning.errors import ConfigError
 from hsi_retarget.easing import ease
 from hsi_retarget.joint_trajectory import JointTrajectory
 from hsi_retarget.sim_check.mjcf import HANDS
+from hsi_retarget.sim_check.shift_guard import ShiftGuard
 from hsi_retarget.sim_check.world import KIND_ROBOT, SimWorld
 
 F64 = NDArray[np.float64]
@@ -55,9 +56,11 @@ class PlaceFeedbackConfig:
     damping: float = 0.02  #: damping of the Jacobian inverse [m]
     hold_s: float = 0.8  #: the shift is held this long after the release [s]
     ease_s: float = 0.8  #: then eased out over this time [s]
+    #: clearance to the furniture that the shifted hand keeps (:mod:`hsi_retarget.sim_check.shift_guard`) [m]
+    clearance_m: float = 0.003
 
     def __post_init__(self) -> None:
-        for name in ("filter_s", "lead_s", "max_shift_m", "damping", "hold_s", "ease_s"):
+        for name in ("filter_s", "lead_s", "max_shift_m", "damping", "hold_s", "ease_s", "clearance_m"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise ConfigError(f"PlaceFeedbackConfig.{name} must be finite and >= 0, got {value}")
@@ -99,6 +102,7 @@ class PlaceFeedback:
         self._active = (
             self.config.enabled and bool(object_name) and self.placement is not None and robot.nq > 0
         )
+        self._guard = ShiftGuard(world, self.config.clearance_m) if self._active else None
 
     def switch(self, trajectory: JointTrajectory) -> None:
         """Take the releases of the task object from ``trajectory`` (now in force)."""
@@ -137,9 +141,9 @@ class PlaceFeedback:
             if weight <= 0.0:
                 self.shift[:] = 0.0
                 self._hands, self._released_at = (), None
-        if not self._hands or not np.any(self.shift):
+        if not self._hands or not np.any(self.shift) or self._guard is None:
             return q_ref
-        return self._apply(q_ref, weight * self.shift)
+        return self._apply(q_ref, self._guard.limit(q_ref, self._hands, weight * self.shift))
 
     def _touching(self) -> bool:
         """Whether the object touches anything but the robot (it is set down, or pressed against the
