@@ -14,6 +14,9 @@ SUCCESS_TARGETS = {"dual_ur5e": 0.90, "humanoid": 0.80}
 IK_FPS_TARGET = 500.0
 _COLOURS = {"implicit": "tab:blue", "minjerk": "tab:orange"}
 
+#: [-] 1-min load average above which the machine counts as busy before a run (its timings are then low)
+BUSY_LOAD = 0.5
+
 
 def _values(rows: list[dict[str, Any]], key: str) -> np.ndarray:
     vals = np.array([r.get(key) for r in rows if r.get(key) is not None], dtype=np.float64)
@@ -139,7 +142,7 @@ def markdown(results: dict[str, Any]) -> str:
         f"seed {results['seed']})",
         "",
         f"Command: `{results['command'].strip()}` — wall time {results['wall_time_s']:.0f} s, "
-        f"{results['workers']} worker(s).",
+        f"{results['workers']} worker(s).{_load(results)}",
         "",
         head,
         "|---" * 13 + "|",
@@ -234,3 +237,14 @@ def plot(path: Path, results: dict[str, Any], rows: list[dict[str, Any]]) -> Non
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)
+
+
+def _load(results: dict[str, Any]) -> str:
+    """The runs' 1-min load averages before the start and at the end, as a sentence ('' unrecorded)."""
+    loads = results.get("load_average") or []
+    if not loads:
+        return ""
+    pairs = " + ".join(f"{a['start']:.1f} / {a['end']:.1f}" for a in loads)
+    busy = any(a["start"] > BUSY_LOAD for a in loads)
+    note = " (busy before the start: other processes shared the cores, timings are low)" if busy else ""
+    return f" Load average before / at the end of each run: {pairs} on {loads[0]['cores']} cores{note}."

@@ -142,6 +142,7 @@ def merge(paths: list[Path], out: Path) -> dict[str, Any]:
         "cells": [c for r in runs for c in r["cells"]],
         "templates": sorted({t for r in runs for t in r["templates"]}),
         "wall_time_s": sum(r["wall_time_s"] for r in runs),
+        "load_average": [a for r in runs for a in r.get("load_average", [])],
         "summary": summarize(rows),
         "rows": rows,
     }
@@ -170,10 +171,18 @@ def main(argv: list[str] | None = None) -> int:
             f"{args.checkpoint} not found (the implicit planner's checkpoint; or --planners minjerk)"
         )
     from _pick_place_cases import make_cases
-    from _pick_place_report import finite, markdown, plot, summarize
+    from _pick_place_report import BUSY_LOAD, finite, markdown, plot, summarize
     from tqdm import tqdm
 
     t_start = time.perf_counter()
+    load_start = os.getloadavg()[0]
+    if load_start > BUSY_LOAD:
+        _LOG.warning(
+            "load average %.1f before the start: other processes share the %d cores, the timings (IK "
+            "frames/s, wall / episode) will be lower than on an idle machine",
+            load_start,
+            os.cpu_count() or 0,
+        )
     n_cases = QUICK_EPISODES if args.quick else args.episodes
     cases = make_cases(n_cases, args.seed)
     cells = [(r, p, pert == "on") for r in args.robots for p in args.planners for pert in args.perturbation]
@@ -222,6 +231,8 @@ def main(argv: list[str] | None = None) -> int:
         "cells": [list(c) for c in cells],
         "templates": sorted({c.template.name for c in cases}),
         "wall_time_s": wall,
+        #: 1-min load averages before the start and at the end (the workers' own load included at the end)
+        "load_average": [{"start": load_start, "end": os.getloadavg()[0], "cores": os.cpu_count() or 0}],
         "summary": summarize(rows),
         "rows": rows,
     }

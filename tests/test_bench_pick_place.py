@@ -81,6 +81,9 @@ def test_quick_run_writes_the_tables(repo_root: Path, tmp_path: Path) -> None:
     assert "dual_ur5e/implicit/plain" in md and "dual_ur5e/implicit/perturbed" in md and "IK [ms/frame]" in md
     assert "IK w/o arm search [frames/s]" in md
     assert results["episodes"] == len(results["rows"]) == 2 and results["cases"] == 1
+    (load,) = results["load_average"]  # how busy the machine was: the timings depend on it
+    assert load["start"] >= 0.0 and load["end"] >= 0.0 and load["cores"] >= 1
+    assert "Load average before / at the end of each run" in md
     rows = {r["perturbed"]: r for r in results["rows"]}
     assert set(rows) == {False, True}
     for row in rows.values():
@@ -126,6 +129,7 @@ def _check_merge(repo_root: Path, run: Path, out: Path) -> None:
     single = json.loads(run.read_text())
     assert merged["episodes"] == 2 * single["episodes"] == len(merged["rows"])
     assert merged["summary"]["cells"].keys() == single["summary"]["cells"].keys()
+    assert merged["load_average"] == 2 * single["load_average"]
     assert "dual_ur5e/implicit/plain" in (out / "pick_place.md").read_text()
     other = out / "other_seed.json"
     other.write_text(json.dumps({**single, "seed": single["seed"] + 1}))
