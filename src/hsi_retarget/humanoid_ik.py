@@ -30,7 +30,7 @@ from hsi_planning.errors import ConfigError
 from hsi_retarget.foot_clearance import dodge
 
 if TYPE_CHECKING:
-    from hsi_retarget.ik import IKTargets
+    from hsi_retarget.ik_types import IKTargets
     from hsi_retarget.robots import RobotModel
     from hsi_retarget.scene_distance import SceneDistance
 

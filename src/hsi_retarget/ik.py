@@ -20,190 +20,32 @@ only then with every row dropped (counted in :attr:`StepInfo.fallback`).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 
 import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
-from hsi_planning.errors import ConfigError, RetargetError
+from hsi_planning.errors import RetargetError
 from hsi_retarget.candidates import CandidateCache
 from hsi_retarget.collision import GROUPS, SceneLayer, collision_rows, min_gap, robot_spheres
 from hsi_retarget.culling import LinkBounds
 from hsi_retarget.face_planes import FacePlanes
 from hsi_retarget.held_object import HeldObject, held_rows
 from hsi_retarget.humanoid_ik import SupportConfig, support_rows
+from hsi_retarget.ik_config import IKConfig
+from hsi_retarget.ik_types import IKResult, IKTargets, StepInfo
 from hsi_retarget.mapping import BASE_JOINTS, LIFT_JOINT
 from hsi_retarget.path_clearance import path_gaps
-from hsi_retarget.qp import solve_qp
+from hsi_retarget.qp import solve_cascade
 from hsi_retarget.robots import RobotModel
 from hsi_retarget.scene_distance import SceneDistance
+
+__all__ = ["IKConfig", "IKResult", "IKSolver", "IKTargets", "StepInfo", "solve_cascade"]
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 _WORLD_MEMO = 4  #: [-] configurations whose sphere centres :meth:`IKSolver._world` keeps
-_STIFF = 1e4  #: [-] weight of the feet's equality rows turned into tasks (:func:`solve_cascade`)
-
-
-@dataclass(frozen=True)
-class IKConfig:
-    """Weights, limits and margins of :class:`IKSolver`."""
-
-    position_weight: float = 1.0  #: [1/m^2] TCP position task
-    orientation_weight: float = 0.01  #: [1/rad^2] TCP orientation task (position weight >> this)
-    root_weight: float = 1.0  #: [1/m^2 or 1/rad^2] base / pelvis goal task
-    lift_weight: float = 0.05  #: [1/m^2] torso lift goal task
-    posture_weight: float = 1e-3  #: [1/rad^2] pull of the arm (and waist/leg) joints to the posture
-    #: [-] TCP position / orientation weight factors at a contact (:attr:`IKTargets.contact` = 1; scaled
-    #: linearly in between): the hand at a grasp wins over the other hand, the posture and the torso lift
-    contact_position_factor: float = 10.0
-    contact_orientation_factor: float = 30.0
-    contact_root_factor: float = 1.5  #: [-] root goal weight factor there (the base follows less)
-    #: [-] factor on ``root_weight`` for a floating base's roll and pitch (the pelvis goal is level):
-    #: below 1 the pelvis tilts over the hips where the hands reach low and far
-    root_tilt_factor: float = 0.1
-    #: [-] TCP weight factor (on top of the contact factors) of a hand holding an opened door's or drawer's
-    #: handle (:attr:`IKTargets.holding`): the part follows that hand, a near-closed chain
-    hold_factor: float = 10.0
-    damping: float = 1e-4  #: [1/rad^2] Levenberg-Marquardt damping of every step
-    max_step: float = 0.05  #: [rad] or [m] largest change of one joint in one step (trust region)
-    iterations: int = 200  #: [-] step limit of :meth:`IKSolver.solve`
-    position_tolerance: float = 1e-4  #: [m] convergence of :meth:`IKSolver.solve`
-    orientation_tolerance: float = 1e-3  #: [rad] convergence of :meth:`IKSolver.solve`
-    scene_margin: float = 0.02  #: [m] clearance kept between robot spheres and the scene
-    tip_margin: float = 0.005  #: [m] clearance kept between finger spheres and the scene at a contact
-    #: [m] that clearance away from contacts (:attr:`IKTargets.contact` 0; linear in between): the fingers
-    #: pass furniture edges with room for the execution's tracking error, and close in only at a grasp
-    tip_margin_far: float = 0.015
-    #: [m] that clearance on a floating-base robot (the humanoid), whose hands lag their command by 2-4 cm
-    #: in MuJoCo
-    tip_margin_far_floating: float = 0.035
-    self_margin: float = 0.015  #: [m] clearance kept between the arms and between an arm and the body
-    #: [m] that clearance on a floating-base robot (the humanoid): its arms lag their command by 2-4 cm in
-    #: MuJoCo while the pelvis and waist lean under them, and at 1.5 cm a forearm and the other upper arm,
-    #: planned apart, met in the simulation (humanoid benchmark: collision-free 59 -> 66% at 3.5 cm)
-    self_margin_floating: float = 0.035
-    #: [m] more scene margin for a floating-base robot's body spheres (torso, pelvis, head, thighs): they
-    #: lag their command by 2-3 cm in MuJoCo too (a head planned 2.7 cm from a shelf touched it)
-    body_margin_floating: float = 0.02
-    #: [m] beyond the margin: farther pairs get no constraint row. A row binds only when one step would
-    #: close ``collision_gain`` of the gap, but a first frame's solve takes large steps: at 0.10 m (6 %
-    #: faster, the same trajectories to 2e-7 rad on 6 benchmark cases) a perturbed episode's re-plan
-    #: missed its grasp.
-    activation_distance: float = 0.15
-    collision_gain: float = 0.5  #: [-] fraction of the gap to the margin one step may close
-    max_collision_rows: int = 24  #: [-] closest pairs constrained per step
-    self_collision: bool = True  #: [-] constrain left/right arm and arm/body spheres
-    #: [m] clearance kept between a held object's surface points and the scene
-    #: (:mod:`hsi_retarget.held_object`), shrinking with the hand's contact closeness (none at the grasp
-    #: and the release)
-    held_margin: float = 0.01
-    max_held_rows: int = 6  #: [-] closest points of one held object constrained per step
-    #: [m] extra reach of the culled collision candidates, reused until a sphere moved half of it
-    #: (:mod:`hsi_retarget.candidates`; the same rows, cheaper); 0: culled anew at every query
-    candidate_slack: float = 0.05
-    #: [-] also hold each sphere off the face plane it was inside its margin of at the step before
-    #: (:mod:`hsi_retarget.face_planes`: no chatter between two faces at a furniture edge); ``None``: on
-    #: for a floating base (measured there: a humanoid's head under a shelf board), off on a fixed one
-    face_planes: bool | None = None
-
-    def __post_init__(self) -> None:
-        positive = ("position_weight", "orientation_weight", "max_step", "position_tolerance")
-        factors = (
-            self.contact_position_factor,
-            self.contact_orientation_factor,
-            self.contact_root_factor,
-            self.hold_factor,
-        )
-        if not all(f >= 1.0 for f in factors):
-            raise ConfigError(
-                f"IKConfig.contact_*_factor (position, orientation, root), hold_factor: >= 1, got {factors}"
-            )
-        for name in (*positive, "orientation_tolerance", "activation_distance"):
-            if not getattr(self, name) > 0.0:
-                raise ConfigError(f"IKConfig.{name} must be > 0, got {getattr(self, name)}")
-        for name in (
-            "root_weight",
-            "root_tilt_factor",
-            "lift_weight",
-            "posture_weight",
-            "damping",
-            "tip_margin",
-            "tip_margin_far",
-            "tip_margin_far_floating",
-            "scene_margin",
-            "self_margin",
-            "self_margin_floating",
-            "body_margin_floating",
-            "held_margin",
-            "candidate_slack",
-        ):
-            if not getattr(self, name) >= 0.0:
-                raise ConfigError(f"IKConfig.{name} must be >= 0, got {getattr(self, name)}")
-        if not 0.0 < self.collision_gain <= 1.0:
-            raise ConfigError(f"IKConfig.collision_gain must be in (0, 1], got {self.collision_gain}")
-        if min(self.tip_margin_far, self.tip_margin_far_floating) < self.tip_margin:
-            raise ConfigError(
-                f"IKConfig.tip_margin_far and tip_margin_far_floating [m] must be >= tip_margin "
-                f"{self.tip_margin}, got {self.tip_margin_far} and {self.tip_margin_far_floating}"
-            )
-        if self.iterations < 1 or self.max_collision_rows < 0 or self.max_held_rows < 0:
-            raise ConfigError("IKConfig.iterations must be >= 1, max_collision_rows and max_held_rows >= 0")
-
-
-@dataclass(frozen=True, eq=False)
-class IKTargets:
-    """Goals of one IK frame (world frame, [m]).
-
-    Attributes:
-        tcp: side -> (4, 4) TCP goal pose (sides without a goal are free, held by the posture task).
-        root: (4, 4) base floor pose (dual arm) or pelvis pose (humanoid); ``None``: free.
-        lift: [m] torso lift goal; ``None``: free.
-        feet: side -> (4, 4) sole poses held exactly (humanoid).
-        support: feet on the floor whose soles form the CoM support polygon.
-        com: (2,) [m] soft CoM goal (humanoid weight shift), ``None``: none.
-        posture: (nq,) posture configuration; ``None``: the robot's home.
-        contact: side -> [0..1] closeness of its TCP goal to a contact (scales its task weights up).
-        holding: sides holding an opened door's or drawer's handle (their TCP weights scaled up more).
-        arm: side -> ((nq,) configuration, weight [1/rad^2]): a task pulling that arm's joints towards
-            the configuration's (e.g. an arm configuration found to reach a grasp,
-            :mod:`hsi_retarget.arm_branch`); unlike the posture, it competes with the other tasks.
-    """
-
-    tcp: dict[str, F64] = field(default_factory=dict)
-    root: F64 | None = None
-    lift: float | None = None
-    feet: dict[str, F64] = field(default_factory=dict)
-    support: tuple[str, ...] = ("left", "right")
-    com: F64 | None = None
-    posture: F64 | None = None
-    contact: dict[str, float] = field(default_factory=dict)
-    holding: tuple[str, ...] = ()
-    arm: dict[str, tuple[F64, float]] = field(default_factory=dict)
-
-
-@dataclass(frozen=True)
-class StepInfo:
-    """Outcome of one step: QP status, fallback level (0: full, 1: relaxed rows, 2: relaxed rows and soft
-    feet, 3: no rows), rows used."""
-
-    success: bool
-    fallback: int
-    collision_rows: int
-    min_clearance: float  #: [m] smallest sphere clearance minus its margin at the step start (inf: none)
-
-
-@dataclass(frozen=True)
-class IKResult:
-    """Outcome of :meth:`IKSolver.solve`: configuration, residuals per side, iterations, convergence."""
-
-    q: F64
-    position_error: dict[str, float]  #: [m]
-    orientation_error: dict[str, float]  #: [rad]
-    iterations: int
-    converged: bool
-    fallbacks: int
 
 
 class IKSolver:
@@ -657,35 +499,3 @@ class IKSolver:
                         break
         pos, ori = self.errors(q, targets)
         return IKResult(q, pos, ori, it, done, fallbacks)
-
-
-def solve_cascade(
-    hess: F64, grad: F64, rows: F64, row_bounds: tuple[F64, F64], box: tuple[F64, F64]
-) -> tuple[F64, bool, int]:
-    """The IK step's QP ``min 1/2 dx^T hess dx + grad^T dx`` with rows ``lo <= rows dx <= hi`` (equality rows:
-    ``lo == hi``; inequality rows: ``hi = inf``) and ``box`` (lbx, ubx), retried while infeasible: level 1
-    with the inequality rows relaxed to ``lo <= 0`` ("do not get closer"), level 2 also with the equality rows
-    as stiff tasks (skipped without equality rows), level 3 without any row.
-
-    Returns:
-        (dx, solved, level).
-    """
-    row_lo, row_hi = row_bounds
-    eq = np.isfinite(row_hi)
-    dx, ok, level = np.zeros(grad.shape[0]), False, 0
-    for level in range(4):
-        if level == 2 and not eq.any():  # level 2 would repeat level 1
-            continue
-        lo, hi = np.array(row_lo, dtype=np.float64), np.array(row_hi, dtype=np.float64)
-        if level in (1, 2):
-            lo[~eq] = np.minimum(lo[~eq], 0.0)
-        h, g, a = hess, grad, rows
-        if level >= 2:
-            h = hess + _STIFF * rows[eq].T @ rows[eq]
-            g = grad - _STIFF * rows[eq].T @ hi[eq]
-            keep = ~eq if level == 2 else np.zeros(eq.shape, dtype=bool)
-            a, lo, hi = rows[keep], lo[keep], hi[keep]
-        dx, ok = solve_qp(h, g, a, row_bounds=(lo, hi), box=box)
-        if ok:
-            break
-    return dx, ok, level
