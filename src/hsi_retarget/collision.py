@@ -360,7 +360,7 @@ def collision_rows(
         return np.zeros((0, model.nv)), np.zeros(0), float(gaps.min())
     order = np.argsort(gaps)[:max_rows]
     ia, ib, dirs = ia[order], ib[order], dirs[order]
-    both = _point_rows(
+    both = point_rows(
         model, data, spheres, centers, idx=np.concatenate([ia, ib]), dirs=np.vstack([dirs, -dirs])
     )
     rows = both[: ia.shape[0]] + both[ia.shape[0] :]
@@ -408,7 +408,7 @@ def scene_layers(
     return layers + ([] if extra is None else [extra])
 
 
-def _point_rows(
+def point_rows(
     model: pin.Model, data: pin.Data, spheres: SphereSet, centers: F64, *, idx: I64, dirs: F64
 ) -> F64:
     """Rows (k, nv): ``dirs[k]`` (3,) times the point Jacobian of sphere ``idx[k]`` (zero where -1), from the

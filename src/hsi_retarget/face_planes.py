@@ -19,7 +19,7 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
-from hsi_retarget.collision import SphereSet, _point_rows
+from hsi_retarget.collision import SphereSet, point_rows
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
@@ -40,11 +40,6 @@ class FacePlanes:
     def clear(self) -> None:
         """Forget the planes (a new scene)."""
         self._idx = np.zeros(0, dtype=np.int64)
-
-    @property
-    def nothing(self) -> tuple[I64, F64, F64]:
-        """No sphere inside its margin (the arguments of :meth:`remember` after ``centers, margin``)."""
-        return np.zeros(0, dtype=np.int64), np.zeros(0), np.zeros((0, 3))
 
     def remember(self, centers: F64, margin: F64, idx: I64, gap: F64, normal: F64) -> None:
         """Take the planes of the spheres ``idx`` (k,) that are ``gap`` (k,) [m] (negative) inside their
@@ -68,5 +63,5 @@ class FacePlanes:
         near = np.linalg.norm(now - self._center, axis=1) < self.reach
         idx, normal = self._idx[near], self._normal[near]
         plane = np.einsum("ij,ij->i", now[near] - self._point[near], normal) - self.spheres.radii[idx]
-        rows = _point_rows(model, data, self.spheres, centers, idx=idx, dirs=normal)
+        rows = point_rows(model, data, self.spheres, centers, idx=idx, dirs=normal)
         return rows, -gain * (plane - margin[idx])

@@ -95,6 +95,8 @@ class IKSolver:
         self._cache = CandidateCache(slack) if slack > 0.0 else None
         planes = cfg.face_planes if cfg.face_planes is not None else floating
         self._planes = FacePlanes(self.spheres) if planes else None
+        #: (S,) [m] the configured scene margin of each sphere (finger tips: ``tip_margin``)
+        self._sphere_margin = np.where(self.spheres.tips, self.margins[1], self.margins[0])
         self._world_memo: dict[bytes, tuple[F64, F64]] = {}
         self._v_max = np.array(robot.v_max)
         self._jq = np.array([robot.q_index(n) for n in robot.joint_names], dtype=np.int64)
@@ -334,15 +336,14 @@ class IKSolver:
         upper[idx_v] = np.minimum(upper[idx_v], hi_q - q[idx_q])
         upper = np.maximum(upper, lower)
         extra = self._extra_margin(targets)
-        inside: list[tuple[I64, F64, F64]] | None = None if self._planes is None else []
-        rows, row_lo, min_slack = self._collision_rows(q, extra, inside)
+        inside: list[tuple[I64, F64, F64]] = []  # filled by collision_rows when asked (face planes)
+        rows, row_lo, min_slack = self._collision_rows(q, extra, None if self._planes is None else inside)
         if self._planes is not None:
             centers = self._world(q, posed=True)[1]
-            margin = np.where(self.spheres.tips, self.margins[1], self.margins[0])
-            margin = margin + extra if extra is not None else margin
+            margin = self._sphere_margin + extra if extra is not None else self._sphere_margin
             more, more_lo = self._planes.rows(self._model, self._data, centers, margin, cfg.collision_gain)
             rows, row_lo = np.vstack([rows, more]), np.concatenate([row_lo, more_lo])
-            self._planes.remember(centers, margin, *(inside[0] if inside else self._planes.nothing))
+            self._planes.remember(centers, margin, *inside[0])
         if self._held:
             more, more_lo = self._held_rows(targets)
             rows, row_lo = np.vstack([rows, more]), np.concatenate([row_lo, more_lo])

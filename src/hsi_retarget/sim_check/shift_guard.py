@@ -19,6 +19,7 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
+from hsi_retarget.sim_check.mjcf import HANDS
 from hsi_retarget.sim_check.world import KIND_FURNITURE, SimWorld
 
 F64 = NDArray[np.float64]
@@ -36,9 +37,7 @@ class ShiftGuard:
         solid = (m.geom_contype | m.geom_conaffinity) > 0
         bounded = m.geom_type != mujoco.mjtGeom.mjGEOM_PLANE  # a plane's bounding radius is 0 (infinite)
         self._furniture = np.flatnonzero((world.geom_kind == KIND_FURNITURE) & solid & bounded)
-        self._hand = {
-            h: np.flatnonzero((world.geom_hand == i) & solid) for i, h in enumerate(("left", "right"))
-        }
+        self._hand = {h: np.flatnonzero((world.geom_hand == i) & solid) for i, h in enumerate(HANDS)}
         self._fromto = np.zeros(6)
 
     def limit(self, q_plan: F64, hands: tuple[str, ...], shift: F64) -> F64:
