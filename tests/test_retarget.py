@@ -251,6 +251,30 @@ def test_humanoid_retarget_keeps_feet_and_normalized_root() -> None:
     assert traj.meta["tracking"]["right"]["max_position_error_m"] < 0.01
 
 
+def test_humanoid_smoothing_leaves_legs_and_root_alone() -> None:
+    """On a floating robot the low-pass takes the arms and the waist that carries them, never the root
+    or the legs (the soles stay in place); on the dual arm the arms, base and lift."""
+    from hsi_retarget.smoothing import smooth_joints, smoothed_joints
+
+    robot = RobotModel("humanoid")
+    names = smoothed_joints(robot)
+    assert {"waist_yaw", "waist_roll", "waist_pitch"} <= set(names)
+    assert set(robot.arm_joints["left"]) <= set(names) and not any("hip" in j or "knee" in j for j in names)
+    rng = np.random.default_rng(5)
+    n = 120
+    t = np.arange(n) / 60.0
+    raw = np.tile(robot.q_home, (n, 1))
+    raw[:, 7:] += 0.02 * rng.standard_normal((n, robot.nq - 7))
+    raw[:, :3] += 0.01 * rng.standard_normal((n, 3))
+    path = smooth_joints(robot, t, raw, 8.0)
+    idx = np.array([robot.q_index(j) for j in names])
+    rest = np.setdiff1d(np.arange(robot.nq), idx)
+    np.testing.assert_array_equal(path[:, rest], raw[:, rest])  # root (and its quaternion) and legs
+    assert np.abs(np.diff(path[:, idx], axis=0)).max() < 0.5 * np.abs(np.diff(raw[:, idx], axis=0)).max()
+    dual_names = smoothed_joints(RobotModel("dual_ur5e"))
+    assert "torso_lift_joint" in dual_names and "base_x_joint" in dual_names
+
+
 def test_hdm05_clip_retargets_with_mm_tracking(hdm05_dir: Path, dual: RobotModel) -> None:
     """An HDM05 reach on the dual-arm robot: scaled up, tracked within 1 cm, limits kept. The frame rate
     is printed, not asserted (speed targets live in ``benchmarks/pick_place.py``, not in timed tests)."""
@@ -571,3 +595,30 @@ def test_frames_stop_at_the_task_residual_with_the_same_tracking(
     assert track_fast["max_position_error_m"] < 1e-3
     with pytest.raises(ConfigError, match="settle_position"):
         RetargetConfig(settle_position=-1e-3)
+
+
+def test_planned_orientations_lose_their_jitter_but_keep_their_turn_and_ends() -> None:
+    """A 90 deg turn over 1.2 s with seeded 40 deg single-sample spikes (the learned planner's jitter):
+    smoothed, the spikes are gone, the turn and both end orientations stay."""
+    from hsi_retarget.rotation_filter import smooth_rotations
+
+    rng = np.random.default_rng(11)
+    t = np.arange(151) * 0.008
+    turn = Rotation.from_euler("z", 90.0 * t[:, None] / t[-1], degrees=True)
+    spikes = rng.choice(np.arange(5, 145), size=12, replace=False)
+    kick = np.zeros((t.shape[0], 3))
+    kick[spikes] = Rotation.random(12, random_state=3).as_rotvec()
+    kick[spikes] *= np.radians(40.0) / np.linalg.norm(kick[spikes], axis=1, keepdims=True)
+    noisy = turn * Rotation.from_rotvec(kick)
+    quats = noisy.as_quat()
+    quats[1::2] *= -1.0  # the same orientations with flipped quaternion signs
+    out = Rotation.from_quat(smooth_rotations(t, quats, 3.0))
+    assert (out[[0, -1]].inv() * noisy[[0, -1]]).magnitude().max() < 1e-9  # ends exact
+    step = np.degrees((out[:-1].inv() * out[1:]).magnitude())
+    assert step.max() < 4.0, step.max()  # was 40 deg within one 8 ms step
+    assert np.degrees((out.inv() * turn).magnitude()).max() < 8.0  # the turn itself is kept
+    np.testing.assert_allclose(smooth_rotations(t, quats, 0.0), quats)  # 0 Hz: as planned
+    with pytest.raises(RetargetError, match="quats"):
+        smooth_rotations(t, quats[:, :3], 3.0)
+    with pytest.raises(RetargetError, match="increasing"):
+        smooth_rotations(t[::-1], quats, 3.0)

@@ -82,7 +82,7 @@ class RetargetConfig:
     settle_orientation: float = 5e-3  #: [rad] the same for the TCP orientation errors
     initial_iterations: int = 200  #: [-] IK steps to converge on the first frame
     velocity_factor: float = 3.0  #: [-] per-frame step bound, multiple of v_max x frame period
-    smoothing_hz: float = 8.0  #: [Hz] low-pass of a fixed-base robot's arm/base/lift joints; 0: none
+    smoothing_hz: float = 8.0  #: [Hz] low-pass of the arms and the joints carrying them (smoothing); 0: none
     sample_rate: float = 60.0  #: [Hz] sampling of schedules and wrist trajectories
     reach_tolerance: float = 0.01  #: [m] IK position residual above which a goal is reported unreached
     repair_iterations: int = 4  #: [-] extra IK steps on a frame that ends ``repair_depth`` inside a margin

@@ -1,7 +1,10 @@
 """Smoothing of the IK's joint paths without giving up its clearances.
 
-The per-frame IK chatters along active collision constraints; :func:`smooth_joints` low-passes the arm,
-base and lift joints (zero phase), which would otherwise force a large time stretch. A low-pass also cuts
+The per-frame IK chatters along active collision constraints; :func:`smooth_joints` low-passes the arm
+joints and the joints carrying the arms (a fixed base's base and lift, a humanoid's waist; never a
+floating root or legs, whose soles must stay in place) at zero phase, which would otherwise force a large
+time stretch (humanoid, drawer and shelf layouts: waist joints stepping 0.15 rad per frame, time-scaled
+into a fast lean that the waist servos lagged by 0.07 rad, 3 cm at the hand). A low-pass also cuts
 corners: where the IK kept an arm exactly at its margin from the other arm or the scene, the smoothed path
 can pass inside it (and the arms touch in MuJoCo). :func:`keep_clearance` blends the smoothed path back to
 the IK's own solution around every frame where smoothing cost more than ``tolerance`` [m] of clearance.
@@ -24,19 +27,34 @@ __all__ = ["keep_clearance", "smooth_joints"]
 F64 = NDArray[np.float64]
 
 
+def smoothed_joints(robot: RobotModel) -> list[str]:
+    """Names of the joints :func:`smooth_joints` low-passes: the arms and, on a fixed base, the base and
+    lift; on a floating robot the joints between its root and its arms (a humanoid's waist), never the
+    root or the legs (the soles must stay exactly in place)."""
+    names = [j for side in SIDES for j in robot.arm_joints[side]]
+    if not robot.floating:
+        return names + [j for j in (*BASE_JOINTS, LIFT_JOINT) if j in robot.joint_names]
+    model, known = robot.model, set(robot.joint_names)
+    for side in SIDES:
+        jid = int(model.parents[model.getJointId(robot.arm_joints[side][0])])
+        while jid > 0:
+            name = str(model.names[jid])
+            if name in known and name not in names:
+                names.append(name)
+            jid = int(model.parents[jid])
+    return names
+
+
 def smooth_joints(robot: RobotModel, t: F64, qs: F64, cutoff_hz: float) -> F64:
-    """Zero-phase low-pass (cut-off ``cutoff_hz`` [Hz]) of the arm joints and the base/lift of ``qs`` (T, nq)
-    sampled at ``t`` (T,) [s], clipped to the joint limits. Fixed-base robots only: a floating robot's arms
-    move with its torso, and its legs must keep the soles exactly in place."""
+    """Zero-phase low-pass (cut-off ``cutoff_hz`` [Hz]) of the joints of :func:`smoothed_joints` in ``qs``
+    (T, nq) sampled at ``t`` (T,) [s], clipped to the joint limits."""
     out = np.array(qs)
-    if cutoff_hz <= 0.0 or t.shape[0] < 16 or robot.floating:
+    if cutoff_hz <= 0.0 or t.shape[0] < 16:
         return out
     fs = 1.0 / float(np.median(np.diff(t)))
     if cutoff_hz >= 0.5 * fs:
         return out
-    names = [j for side in SIDES for j in robot.arm_joints[side]]
-    names += [j for j in (*BASE_JOINTS, LIFT_JOINT) if j in robot.joint_names]
-    idx = np.array([robot.q_index(j) for j in names], dtype=np.int64)
+    idx = np.array([robot.q_index(j) for j in smoothed_joints(robot)], dtype=np.int64)
     out[:, idx] = np.clip(lowpass(qs[:, idx], fs, cutoff_hz), robot.q_lower[idx], robot.q_upper[idx])
     return out
 

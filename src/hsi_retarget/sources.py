@@ -27,11 +27,15 @@ from hsi_planning.mocap.reach import wrist_rotations
 from hsi_planning.trajectory import WristTrajectory
 from hsi_retarget.human_motion import SIDES, HumanMotion
 from hsi_retarget.joint_trajectory import ContactEvent
+from hsi_retarget.rotation_filter import smooth_rotations
 
 if TYPE_CHECKING:  # the scheduler package is imported only when a schedule is retargeted
     from hsi_planning.scheduler.schedule import Schedule
 
 F64 = NDArray[np.float64]
+#: [Hz] low-pass of the planned wrist orientations (the learned planner's jitter; a reach's own turning
+#: stays below it)
+ROTATION_CUTOFF_HZ = 3.0
 _SHOULDER_NAMES = {
     "acclaim": ("{s}clavicle",),
     "bvh": ("{s}humerus", "{S}Arm", "{S}UpArm", "{S}Shoulder", "{side}_shoulder"),
@@ -133,19 +137,28 @@ def _keyframe_path(times: F64, positions: F64, quats: F64, t: F64) -> tuple[F64,
     return p, np.asarray(slerp(np.clip(phase, times[0], times[-1])).as_matrix())
 
 
-def _overlay(t: F64, pos: F64, rot: F64, start: float, traj: WristTrajectory) -> None:
-    """Replace the samples of ``t`` inside a planned segment (starting at ``start`` [s]) by the segment."""
+def _overlay(
+    t: F64, pos: F64, rot: F64, start: float, traj: WristTrajectory, *, cutoff_hz: float = ROTATION_CUTOFF_HZ
+) -> None:
+    """Replace the samples of ``t`` inside a planned segment (starting at ``start`` [s]) by the segment, its
+    orientations low-passed at ``cutoff_hz`` [Hz] (:func:`~hsi_retarget.rotation_filter.smooth_rotations`;
+    0: as planned)."""
     inside = (t >= start + traj.t[0]) & (t <= start + traj.t[-1])
     if not inside.any():
         return
     local = t[inside] - start
     pos[inside] = np.column_stack([np.interp(local, traj.t, traj.position[:, i]) for i in range(3)])
-    rot[inside] = Slerp(traj.t, Rotation.from_quat(traj.quaternion))(local).as_matrix()
+    quats = smooth_rotations(traj.t, traj.quaternion, cutoff_hz)
+    rot[inside] = Slerp(traj.t, Rotation.from_quat(quats))(local).as_matrix()
 
 
-def human_motion_from_schedule(schedule: Schedule, rate: float = 60.0) -> HumanMotion:
+def human_motion_from_schedule(
+    schedule: Schedule, rate: float = 60.0, rotation_cutoff_hz: float = ROTATION_CUTOFF_HZ
+) -> HumanMotion:
     """Samples at ``rate`` [Hz] of a schedule: hip and wrist keyframes (min-jerk between them) with the
-    planned wrist segments laid over their time spans; grasp/release keyframes become events."""
+    planned wrist segments laid over their time spans, their orientations low-passed at
+    ``rotation_cutoff_hz`` [Hz] (0: as planned; :mod:`hsi_retarget.rotation_filter`); grasp/release
+    keyframes become events."""
     hips = schedule.of("hip")
     if not hips:
         raise RetargetError(f"schedule {schedule.task_id!r} has no hip keyframes")
@@ -171,7 +184,7 @@ def human_motion_from_schedule(schedule: Schedule, rate: float = 60.0) -> HumanM
         )
         for seg in schedule.segments:
             if seg.trajectory.hand == side:
-                _overlay(t, p, r, seg.start_time, seg.trajectory)
+                _overlay(t, p, r, seg.start_time, seg.trajectory, cutoff_hz=rotation_cutoff_hz)
         wrist_p[side], wrist_r[side], active[side] = p, r, np.ones(t.shape[0], dtype=bool)
     events = []
     for k in schedule.events():
