@@ -622,3 +622,5 @@ def test_planned_orientations_lose_their_jitter_but_keep_their_turn_and_ends() -
         smooth_rotations(t, quats[:, :3], 3.0)
     with pytest.raises(RetargetError, match="increasing"):
         smooth_rotations(t[::-1], quats, 3.0)
+    with pytest.raises(ConfigError, match="rotation_cutoff_hz"):
+        RetargetConfig(rotation_cutoff_hz=-1.0)

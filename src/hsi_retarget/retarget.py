@@ -51,7 +51,7 @@ from hsi_retarget.retrack import retrack_missed
 from hsi_retarget.robots import RobotModel
 from hsi_retarget.scene_distance import SceneDistance
 from hsi_retarget.smoothing import keep_clearance, smooth_joints  # noqa: F401 (smooth_joints: API)
-from hsi_retarget.sources import human_motion_from_schedule, human_motion_from_wrists
+from hsi_retarget.sources import ROTATION_CUTOFF_HZ, human_motion_from_schedule, human_motion_from_wrists
 from hsi_retarget.timing import TimingConfig, time_parameterize
 from hsi_retarget.tracking import tcp_errors, track
 
@@ -84,6 +84,9 @@ class RetargetConfig:
     velocity_factor: float = 3.0  #: [-] per-frame step bound, multiple of v_max x frame period
     smoothing_hz: float = 8.0  #: [Hz] low-pass of the arms and the joints carrying them (smoothing); 0: none
     sample_rate: float = 60.0  #: [Hz] sampling of schedules and wrist trajectories
+    #: [Hz] low-pass of a schedule's planned wrist orientations, their contact ends kept
+    #: (:mod:`hsi_retarget.rotation_filter`: the learned planner's jitter); 0: as planned
+    rotation_cutoff_hz: float = ROTATION_CUTOFF_HZ
     reach_tolerance: float = 0.01  #: [m] IK position residual above which a goal is reported unreached
     repair_iterations: int = 4  #: [-] extra IK steps on a frame that ends ``repair_depth`` inside a margin
     repair_depth: float = 0.005  #: [m] depth inside a collision margin that triggers the extra steps
@@ -143,6 +146,10 @@ class RetargetConfig:
             raise ConfigError(f"RetargetConfig.repair_depth must be in [0, 0.1) m, got {self.repair_depth}")
         if not self.smoothing_hz >= 0.0:
             raise ConfigError(f"RetargetConfig.smoothing_hz must be >= 0 Hz, got {self.smoothing_hz}")
+        if not self.rotation_cutoff_hz >= 0.0:
+            raise ConfigError(
+                f"RetargetConfig.rotation_cutoff_hz must be >= 0 Hz (0: none), got {self.rotation_cutoff_hz}"
+            )
         positive = (self.velocity_factor, self.sample_rate, self.reach_tolerance, self.held_reach)
         if not all(v > 0.0 for v in positive):
             raise ConfigError(
@@ -175,7 +182,7 @@ def _human_motion(
         return source, [], [], []
     if hasattr(source, "keyframes") and hasattr(source, "segments"):  # a Schedule
         schedule = cast("Schedule", source)
-        motion = human_motion_from_schedule(schedule, cfg.sample_rate)
+        motion = human_motion_from_schedule(schedule, cfg.sample_rate, cfg.rotation_cutoff_hz)
         turns: list[dict[str, Any]] = []
         windows: list[GraspWindow] = []
         shifted: list[dict[str, Any]] = []
