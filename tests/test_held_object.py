@@ -11,7 +11,7 @@ import trimesh
 from hsi_planning.errors import RetargetError
 from hsi_planning.scene import scene_meshes
 from hsi_planning.scene_paths import load_scene
-from hsi_retarget.held_object import SPACING, HeldObject, attach, held_rows, surface_points
+from hsi_retarget.held_object import SPACING, HeldObject, attach, held_rows, inner_spheres, surface_points
 from hsi_retarget.ik import IKSolver, IKTargets
 from hsi_retarget.robots import RobotModel
 from hsi_retarget.scene_distance import SceneDistance
@@ -61,7 +61,34 @@ def test_attached_points_ride_with_the_tcp(kitchen_meshes: dict[str, trimesh.Tri
     shift[:3, 3] = [0.0, 0.2, 0.0]  # e.g. the drawer it stands in pulled out 20 cm
     held = attach("can1", "right", mesh, tcp, shift)
     world = held.points @ tcp[:3, :3].T + tcp[:3, 3]
-    np.testing.assert_allclose(world, surface_points(mesh) + shift[:3, 3], atol=1e-12)
+    centres, radii = inner_spheres(mesh)
+    np.testing.assert_allclose(world, np.vstack([surface_points(mesh), centres]) + shift[:3, 3], atol=1e-12)
+    assert held.radii is not None
+    np.testing.assert_array_equal(held.radii, np.concatenate([np.zeros(world.shape[0] - radii.size), radii]))
+
+
+@pytest.mark.parametrize("name", ["can1", "bottle1", "box1"])
+def test_inner_spheres_stay_inside_and_stop_a_thin_board(
+    kitchen_meshes: dict[str, trimesh.Trimesh], name: str
+) -> None:
+    """The spheres along the object's long axis lie inside it, and an 18 mm board through the object's
+    middle, which can pass between its surface points, cuts into them."""
+    mesh = kitchen_meshes[name]
+    centres, radii = inner_spheres(mesh)
+    assert centres.shape[0] >= 1 and np.all(radii > 0.0)
+    dist, _ = SceneDistance({name: mesh}, ground=()).query(centres)
+    assert np.all(dist <= -radii + 1e-6)  # each sphere inside the mesh (its centre at least r deep)
+    middle = mesh.bounding_box_oriented.primitive.transform[:3, 3]
+    board = trimesh.creation.box((2.0, 2.0, 0.018))
+    board.apply_translation(middle)
+    scene = SceneDistance({"board": board}, ground=())
+    surface = surface_points(mesh)
+    d_surface, _ = scene.query(surface)
+    d_spheres, _ = scene.query(centres)
+    assert np.min(d_spheres - radii) < -0.005  # the spheres see the board deep inside the object
+    assert np.min(d_surface) > -0.02  # (the surface points at best graze it)
+    with pytest.raises(RetargetError, match="radii"):
+        HeldObject(name, "left", centres, radii[:-1] if radii.size > 1 else np.zeros(2))
 
 
 def _distance(robot: RobotModel, q: np.ndarray, held: HeldObject, scene: SceneDistance) -> float:

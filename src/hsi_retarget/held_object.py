@@ -4,7 +4,9 @@ The retargeting's scene leaves out every object the task touches, so without thi
 object through a cabinet's top as long as the hand itself passes under it; in MuJoCo the object then
 catches on the furniture and wrenches the wrist off its command. From the frame at which the IK has
 reached a grasp (:func:`~hsi_retarget.carry_correction.carry_frames`) until the release, the object's
-surface points, fixed to the TCP frame as the hand reached it (:func:`attach`), keep ``held_margin``
+surface points and the spheres inside it along its long axis (:func:`inner_spheres`: a shelf board
+thinner than the points' spacing cannot pass between them), fixed to the TCP frame as the hand reached
+it (:func:`attach`), keep ``held_margin``
 (:class:`~hsi_retarget.ik.IKConfig`) from the scene: :func:`held_rows` adds the linearized distance
 constraints of the closest points to the IK step, as :func:`~hsi_retarget.collision.collision_rows` does
 for the robot's spheres. The margin shrinks with the hand's contact closeness (1 at the grasp and the
@@ -28,15 +30,50 @@ F64 = NDArray[np.float64]
 SPACING = 0.02  #: [m] largest spacing of an object's surface points (one per cell of this size)
 MAX_POINTS = 96  #: [-] most surface points of one object
 _SAMPLES = 2000  #: [-] surface samples drawn (seeded) before the thinning to one per cell
+_MIN_RADIUS = 0.003  #: [m] thinner inner spheres are left out (:func:`inner_spheres`)
 
 
 @dataclass(frozen=True, eq=False)
 class HeldObject:
-    """An object held by one hand: its surface points in that hand's TCP frame."""
+    """An object held by one hand: points in that hand's TCP frame, each the centre of a sphere of its
+    radius (0: a surface point)."""
 
     name: str  #: the object's name in the scene
     side: str  #: the hand holding it (``left``/``right``)
-    points: F64  #: (K, 3) [m] surface points in the TCP frame
+    points: F64  #: (K, 3) [m] surface points and inner sphere centres in the TCP frame
+    radii: F64 | None = None  #: (K,) [m] sphere radii (``None``: all 0, surface points only)
+
+    def __post_init__(self) -> None:
+        k = np.asarray(self.points).shape[0]
+        radii = np.zeros(k) if self.radii is None else np.asarray(self.radii, dtype=np.float64)
+        if radii.shape != (k,) or np.any(radii < 0.0):
+            raise RetargetError(f"HeldObject.radii must be ({k},) radii >= 0 m, got shape {radii.shape}")
+        object.__setattr__(self, "radii", radii)
+
+
+def inner_spheres(mesh: trimesh.Trimesh) -> tuple[F64, F64]:
+    """Spheres inside ``mesh`` (world frame) along its oriented bounding box's longest axis, one per
+    smallest half extent of the box along it (ends inset by that), each as large as fits inside the mesh
+    at its centre (a bottle's neck gets smaller ones; none thinner than 3 mm). Surface points about
+    :data:`SPACING` apart let a board thinner than that pass between them (an 18 mm shelf board went
+    through a held bottle); a slab through the object's middle meets these. Returns centres (S, 3) [m] and
+    radii (S,) [m]."""
+    box = mesh.bounding_box_oriented
+    extents = np.asarray(box.primitive.extents, dtype=np.float64)
+    frame = np.asarray(box.primitive.transform, dtype=np.float64)
+    order = np.argsort(extents)
+    radius = 0.5 * float(extents[order[0]])
+    half = 0.5 * float(extents[order[-1]]) - radius
+    if radius <= 0.0:
+        return np.zeros((0, 3)), np.zeros(0)
+    count = max(int(np.ceil(2.0 * half / radius)) + 1, 1) if half > 0.0 else 1
+    along = np.linspace(-half, half, count) if half > 0.0 else np.zeros(1)
+    axis = frame[:3, order[-1]]
+    centres = frame[:3, 3] + along[:, None] * axis
+    depth, _ = SceneDistance({"object": mesh}, ground=()).query(centres)
+    radii = np.minimum(radius, -np.asarray(depth, dtype=np.float64))
+    keep = radii > _MIN_RADIUS
+    return centres[keep], radii[keep]
 
 
 def surface_points(mesh: trimesh.Trimesh, spacing: float = SPACING, max_points: int = MAX_POINTS) -> F64:
@@ -66,11 +103,14 @@ def surface_points(mesh: trimesh.Trimesh, spacing: float = SPACING, max_points: 
 def attach(name: str, side: str, mesh: trimesh.Trimesh, tcp: F64, shift: F64 | None = None) -> HeldObject:
     """``mesh`` (the object at rest, world frame; moved by ``shift`` (4, 4), e.g. with the drawer it stands
     in) held by the hand ``side`` whose TCP is at ``tcp`` (4, 4) [m] (world)."""
-    points = surface_points(mesh)
+    centres, radii = inner_spheres(mesh)
+    surface = surface_points(mesh)
+    points = np.vstack([surface, centres])
     if shift is not None:
         points = points @ np.asarray(shift)[:3, :3].T + np.asarray(shift)[:3, 3]
     inv = np.linalg.inv(np.asarray(tcp, dtype=np.float64))
-    return HeldObject(name, side, points @ inv[:3, :3].T + inv[:3, 3])
+    all_radii = np.concatenate([np.zeros(surface.shape[0]), radii])
+    return HeldObject(name, side, points @ inv[:3, :3].T + inv[:3, 3], all_radii)
 
 
 def held_rows(
@@ -93,7 +133,8 @@ def held_rows(
         return np.zeros((0, nv)), np.zeros(0)
     world = held.points @ tcp[:3, :3].T + tcp[:3, 3]
     found = [layer.query(world) for layer in layers]
-    dist = np.concatenate([d for d, _ in found])
+    radii = held.radii if held.radii is not None else np.zeros(world.shape[0])
+    dist = np.concatenate([d - radii for d, _ in found])
     normal = np.concatenate([n for _, n in found])
     which = np.tile(np.arange(world.shape[0]), len(layers))
     slack = dist - margin
