@@ -15,7 +15,7 @@ release, where the object rests on its support: no rows there).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import trimesh
@@ -41,11 +41,13 @@ class HeldObject:
     name: str  #: the object's name in the scene
     side: str  #: the hand holding it (``left``/``right``)
     points: F64  #: (K, 3) [m] surface points and inner sphere centres in the TCP frame
-    radii: F64 | None = None  #: (K,) [m] sphere radii (``None``: all 0, surface points only)
+    #: (K,) [m] sphere radii (empty: all 0, surface points only)
+    radii: F64 = field(default_factory=lambda: np.zeros(0))
 
     def __post_init__(self) -> None:
         k = np.asarray(self.points).shape[0]
-        radii = np.zeros(k) if self.radii is None else np.asarray(self.radii, dtype=np.float64)
+        radii = np.asarray(self.radii, dtype=np.float64)
+        radii = np.zeros(k) if radii.size == 0 else radii
         if radii.shape != (k,) or np.any(radii < 0.0):
             raise RetargetError(f"HeldObject.radii must be ({k},) radii >= 0 m, got shape {radii.shape}")
         object.__setattr__(self, "radii", radii)
@@ -66,8 +68,7 @@ def inner_spheres(mesh: trimesh.Trimesh) -> tuple[F64, F64]:
     half = 0.5 * float(extents[order[-1]]) - radius
     if radius <= 0.0:
         return np.zeros((0, 3)), np.zeros(0)
-    count = max(int(np.ceil(2.0 * half / radius)) + 1, 1) if half > 0.0 else 1
-    along = np.linspace(-half, half, count) if half > 0.0 else np.zeros(1)
+    along = np.linspace(-half, half, int(np.ceil(2.0 * half / radius)) + 1)  # half >= 0: one sphere at least
     axis = frame[:3, order[-1]]
     centres = frame[:3, 3] + along[:, None] * axis
     depth, _ = SceneDistance({"object": mesh}, ground=()).query(centres)
@@ -103,8 +104,8 @@ def surface_points(mesh: trimesh.Trimesh, spacing: float = SPACING, max_points: 
 def attach(name: str, side: str, mesh: trimesh.Trimesh, tcp: F64, shift: F64 | None = None) -> HeldObject:
     """``mesh`` (the object at rest, world frame; moved by ``shift`` (4, 4), e.g. with the drawer it stands
     in) held by the hand ``side`` whose TCP is at ``tcp`` (4, 4) [m] (world)."""
-    centres, radii = inner_spheres(mesh)
     surface = surface_points(mesh)
+    centres, radii = inner_spheres(mesh)
     points = np.vstack([surface, centres])
     if shift is not None:
         points = points @ np.asarray(shift)[:3, :3].T + np.asarray(shift)[:3, 3]
@@ -133,8 +134,7 @@ def held_rows(
         return np.zeros((0, nv)), np.zeros(0)
     world = held.points @ tcp[:3, :3].T + tcp[:3, 3]
     found = [layer.query(world) for layer in layers]
-    radii = held.radii if held.radii is not None else np.zeros(world.shape[0])
-    dist = np.concatenate([d - radii for d, _ in found])
+    dist = np.concatenate([d - held.radii for d, _ in found])
     normal = np.concatenate([n for _, n in found])
     which = np.tile(np.arange(world.shape[0]), len(layers))
     slack = dist - margin
