@@ -5,13 +5,22 @@ retargeted schedule that hold it."""
 from __future__ import annotations
 
 import numpy as np
+import pinocchio as pin
 import pytest
 import trimesh
 
 from hsi_planning.errors import RetargetError
 from hsi_planning.scene import scene_meshes
 from hsi_planning.scene_paths import load_scene
-from hsi_retarget.held_object import SPACING, HeldObject, attach, held_rows, inner_spheres, surface_points
+from hsi_retarget.held_object import (
+    SPACING,
+    HeldObject,
+    attach,
+    held_rows,
+    inner_spheres,
+    near_spheres,
+    surface_points,
+)
 from hsi_retarget.ik import IKSolver, IKTargets
 from hsi_retarget.robots import RobotModel
 from hsi_retarget.scene_distance import SceneDistance
@@ -155,3 +164,43 @@ def test_hold_rejects_an_unknown_hand(dual: RobotModel) -> None:
     solver = IKSolver(dual)
     with pytest.raises(RetargetError, match="valid"):
         solver.hold(HeldObject("can1", "middle", np.zeros((1, 3))))
+
+
+def test_held_object_rows_against_the_other_arm_match_finite_differences(dual: RobotModel) -> None:
+    """A held object keeps the self-collision margin from the other arm and the body: its rows are the
+    derivative of the point-to-sphere gaps (both arms moving)."""
+    rng = np.random.default_rng(5)
+    solver = IKSolver(dual)
+    right, left = dual.tcp_frames["right"], dual.tcp_frames["left"]
+    q = dual.q_home.copy()
+    tcp = dual.fk(q, (right,))[right]
+    target = dual.fk(q, (left,))[left][:3, 3] + [0.0, 0.0, 0.12]  # a point 12 cm above the left TCP
+    point = HeldObject("box", "right", (np.linalg.inv(tcp) @ np.append(target, 1.0))[None, :3])
+    solver.hold(point)
+    others = solver._not_arm["right"]
+
+    pin.computeJointJacobians(solver._model, solver._data, q)
+    pin.updateFramePlacements(solver._model, solver._data)
+    rows, lower = solver._held_rows(IKTargets(), q)
+    assert rows.shape[0] == solver.config.max_held_rows  # the closest pairs only
+    _, idx, _, gap = near_spheres(
+        point,
+        tcp,
+        solver.sphere_centers(q)[others],
+        solver.spheres.radii[others],
+        margin=solver.margins[2],
+        activation=solver.config.activation_distance,
+        max_rows=solver.config.max_held_rows,
+    )
+    np.testing.assert_allclose(lower, -solver.config.collision_gain * gap)
+    assert gap.min() < 0.1  # the left gripper's spheres are near the point
+    dq = np.zeros(dual.nv)
+    dq[solver.act] = rng.normal(size=solver.act.shape[0]) * 1e-6
+    moved = dual.integrate(q, dq)
+    pose = dual.fk(moved, (right,))[right]
+    world = point.points @ pose[:3, :3].T + pose[:3, 3]
+    centers = solver.sphere_centers(moved)[others][idx]
+    after = np.linalg.norm(world - centers, axis=1)
+    radii = solver.spheres.radii[others][idx]
+    origin = np.linalg.norm(target - solver.sphere_centers(q)[others][idx], axis=1) - radii
+    np.testing.assert_allclose(rows @ dq, after - radii - origin, rtol=1e-3, atol=1e-10)

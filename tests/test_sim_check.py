@@ -373,11 +373,14 @@ def test_drawer_pulled_by_its_handle() -> None:
     assert not closed.success and "opened" in closed.failures[0]
 
 
-def test_a_part_is_welded_at_the_tcp_and_a_free_object_at_its_origin(world: SimWorld) -> None:
-    """A door's or drawer's weld point is the TCP (the point the trajectory moves along its arc), a free
-    object's its origin; both ends of each weld are that point when it is made (no jump)."""
+def test_a_part_is_welded_at_the_tcp_and_a_free_object_at_its_origin() -> None:
+    """Without handle pivots a door's or drawer's weld point is the TCP (the point the trajectory moves
+    along its arc), a free object's its origin; both ends of each weld are that point when it is made (no
+    jump). (With them, the default, a part is held by its pivot pair: tests/test_handle_grip.py.)"""
     from hsi_retarget.sim_check.grasp import GraspController
 
+    world = build_world(WorldConfig(base_pose=COUNTER_BASE, handle_pivot=False))
+    assert world.pivots == {}
     grasp = GraspController(world)
     m, d = world.model, world.data
     for hand, target in (("right", "drawer_unit1/drawer1"), ("left", "can1")):
@@ -390,7 +393,6 @@ def test_a_part_is_welded_at_the_tcp_and_a_free_object_at_its_origin(world: SimW
         np.testing.assert_allclose(on_gripper, point, atol=1e-9)
         np.testing.assert_allclose(on_target, point, atol=1e-9)
         assert d.eq_active[eq] == 1 and grasp.held[hand] == target
-    world.reset()
 
 
 def test_push_spikes_tracking_error_and_execution_recovers(world: SimWorld) -> None:

@@ -27,6 +27,7 @@ from hsi_retarget.scene_distance import SceneDistance
 __all__ = ["HeldObject", "attach", "held_rows", "surface_points"]
 
 F64 = NDArray[np.float64]
+I64 = NDArray[np.int64]
 SPACING = 0.02  #: [m] largest spacing of an object's surface points (one per cell of this size)
 MAX_POINTS = 96  #: [-] most surface points of one object
 _SAMPLES = 2000  #: [-] surface samples drawn (seeded) before the thinning to one per cell
@@ -146,3 +147,33 @@ def held_rows(
     # n . (v + w x r) = n . v + (r x n) . w
     rows = n @ jacobian[:3] + np.cross(lever, n) @ jacobian[3:]
     return rows, -gain * slack[near]
+
+
+def near_spheres(
+    held: HeldObject,
+    tcp: F64,
+    centers: F64,
+    radii: F64,
+    *,
+    margin: float,
+    activation: float,
+    max_rows: int,
+) -> tuple[F64, I64, F64, F64]:
+    """The ``max_rows`` closest pairs of ``held``'s points (its hand's TCP at ``tcp`` (4, 4)) and robot
+    spheres (centres (S, 3) [m], ``radii`` (S,) [m]) within ``activation`` [m] beyond ``margin`` [m]: the
+    points (k, 3) [m] (world), sphere indices (k,), unit normals (k, 3) from the sphere to the point and
+    gaps beyond the margin (k,) [m]."""
+    empty = (np.zeros((0, 3)), np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros(0))
+    if max_rows <= 0 or centers.shape[0] == 0:
+        return empty
+    world = held.points @ tcp[:3, :3].T + tcp[:3, 3]
+    diff = world[:, None, :] - centers[None, :, :]
+    dist = np.sqrt(np.einsum("psk,psk->ps", diff, diff))
+    gap = dist - radii[None, :] - held.radii[:, None] - margin
+    p, s = np.nonzero(gap < activation)
+    if p.size == 0:
+        return empty
+    order = np.argsort(gap[p, s])[:max_rows]
+    p, s = p[order], s[order]
+    normal = diff[p, s] / np.maximum(dist[p, s], 1e-9)[:, None]
+    return world[p], s.astype(np.int64), normal, gap[p, s]

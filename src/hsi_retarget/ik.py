@@ -27,10 +27,10 @@ from numpy.typing import NDArray
 
 from hsi_planning.errors import RetargetError
 from hsi_retarget.candidates import CandidateCache
-from hsi_retarget.collision import GROUPS, SceneLayer, collision_rows, min_gap, robot_spheres
+from hsi_retarget.collision import GROUPS, SceneLayer, collision_rows, min_gap, point_rows, robot_spheres
 from hsi_retarget.culling import LinkBounds
 from hsi_retarget.face_planes import FacePlanes
-from hsi_retarget.held_object import HeldObject, held_rows
+from hsi_retarget.held_object import HeldObject, held_rows, near_spheres
 from hsi_retarget.humanoid_ik import SupportConfig, support_rows
 from hsi_retarget.ik_config import IKConfig
 from hsi_retarget.ik_types import IKResult, IKTargets, StepInfo
@@ -68,6 +68,11 @@ class IKSolver:
         }
         self.spheres = robot_spheres(robot)
         pairs = self.spheres.pairs()
+        #: side -> the spheres a held object of that hand keeps the self margin from (the other arm, the body)
+        self._not_arm = {
+            side: np.flatnonzero(self.spheres.groups != GROUPS.index(side)).astype(np.int64)
+            for side in ("left", "right")
+        }
         self._bounds = LinkBounds(self.spheres, pairs)
         self._pairs = pairs if self._bounds.pairs is None else self._bounds.pairs  # the very array: culled
         self._layer: SceneLayer | None = None
@@ -247,10 +252,12 @@ class IKSolver:
         """side -> the object that hand holds (a copy)."""
         return dict(self._held)
 
-    def _held_rows(self, targets: IKTargets) -> tuple[F64, F64]:
-        """Rows A (k, nv) and lower bounds (k,) keeping the held objects off the scene."""
+    def _held_rows(self, targets: IKTargets, q: F64) -> tuple[F64, F64]:
+        """Rows A (k, nv) and lower bounds (k,) keeping the held objects off the scene and off the robot's
+        other arm and body (:func:`~hsi_retarget.held_object.near_spheres`, at the self-collision margin)."""
         cfg, nv = self.config, self.robot.nv
         blocks, lows = [np.zeros((0, nv))], [np.zeros(0)]
+        centers = self._world(q, posed=True)[1]
         for side, held in self._held.items():
             closeness = targets.contact.get(side, 0.0)
             if closeness >= 1.0:  # resting on its support at the grasp or the release
@@ -259,10 +266,11 @@ class IKSolver:
             if self._layer is not None and self._layer_holder != side:
                 layers.append(self._layer[0])
             fid = self._tcp_ids[side]
+            tcp, jac = np.asarray(self._data.oMf[fid].homogeneous), self._frame_jacobian(fid)
             rows, low = held_rows(
                 held,
-                np.asarray(self._data.oMf[fid].homogeneous),
-                self._frame_jacobian(fid),
+                tcp,
+                jac,
                 layers,
                 margin=cfg.held_margin * (1.0 - closeness),
                 activation=cfg.activation_distance,
@@ -271,6 +279,24 @@ class IKSolver:
             )
             blocks.append(rows)
             lows.append(low)
+            others = self._not_arm[side]
+            points, idx, normal, gap = near_spheres(
+                held,
+                tcp,
+                centers[others],
+                self.spheres.radii[others],
+                margin=self.margins[2],
+                activation=cfg.activation_distance,
+                max_rows=cfg.max_held_rows,
+            )
+            if gap.size:
+                lever = points - tcp[:3, 3]
+                own = normal @ jac[:3] + np.cross(lever, normal) @ jac[3:]
+                theirs = point_rows(
+                    self._model, self._data, self.spheres, centers, idx=others[idx], dirs=-normal
+                )
+                blocks.append(own + theirs)
+                lows.append(-cfg.collision_gain * gap)
         return np.vstack(blocks), np.concatenate(lows)
 
     def _extra_margin(self, targets: IKTargets) -> F64 | None:
@@ -345,7 +371,7 @@ class IKSolver:
             rows, row_lo = np.vstack([rows, more]), np.concatenate([row_lo, more_lo])
             self._planes.remember(centers, margin, *inside[0])
         if self._held:
-            more, more_lo = self._held_rows(targets)
+            more, more_lo = self._held_rows(targets, q)
             rows, row_lo = np.vstack([rows, more]), np.concatenate([row_lo, more_lo])
         row_hi = np.full(row_lo.shape, np.inf)
         if robot.floating and targets.feet:

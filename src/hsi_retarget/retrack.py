@@ -30,6 +30,7 @@ from hsi_retarget.arm_branch import (
     scaled,
 )
 from hsi_retarget.grasp_windows import GraspWindow
+from hsi_retarget.handle_hold import HandleHold
 from hsi_retarget.ik import IKSolver, IKTargets
 from hsi_retarget.joint_trajectory import ContactEvent
 from hsi_retarget.mapping import RobotGoals
@@ -57,12 +58,13 @@ def retrack_missed(
     events: Sequence[ContactEvent],
     windows: Sequence[GraspWindow],
     objects: Mapping[str, trimesh.Trimesh] | None = None,
+    handles: Sequence[HandleHold] = (),
 ) -> tuple[F64, dict[str, Any]]:
     """Configurations (T, nq) and diagnostics of ``goals`` tracked again with arm configuration tasks at the
     grasps and releases of free objects that the ``first`` tracking (configurations, TCP position errors,
     diagnostics) missed by more than the trigger distance (:mod:`hsi_retarget.arm_branch`), when that
     misses less in total at all those contacts (``windows``); else the first tracking's. ``objects``: the
-    held objects' meshes, as for :func:`track`.
+    held objects' meshes, ``handles``: the handle holds, as for :func:`track`.
     ``diag["arm_branches"]`` reports the search when there was one."""
     qs, pos_err, diag = first
     trace = diag.pop("trace", None)
@@ -116,6 +118,7 @@ def retrack_missed(
             part=part,
             events=events,
             objects=objects,
+            handles=handles,
         )
     report["time_s"] = time.perf_counter() - started
     _LOG.info(
@@ -162,7 +165,8 @@ def _retrack(
     ``branches``' arm tasks, scaled by 1 and then each escalation factor of ``branch_cfg`` while a ``missed``
     contact still misses by more than its trigger: each try up to the last missed contact only, the one
     missing least there tracked on to the end and kept when it misses less than the first over all
-    ``contacts`` (``report`` filled in). ``kwargs``: ``part``, ``events``, ``objects`` of :func:`track`."""
+    ``contacts`` (``report`` filled in). ``kwargs``: ``part``, ``events``, ``objects``, ``handles`` of
+    :func:`track`."""
     qs, diag, trace = first
     n = goals.t.shape[0]
     # the targets differ from the first frame that an arm task weighs on: track on from there

@@ -13,7 +13,7 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -24,6 +24,7 @@ from numpy.typing import NDArray
 from hsi_retarget.arm_branch import ArmBranch
 from hsi_retarget.carry_correction import carry_frames, correct_carry
 from hsi_retarget.foot_clearance import part_sweep
+from hsi_retarget.handle_hold import HandleHold
 from hsi_retarget.held_object import attach
 from hsi_retarget.human_motion import SIDES
 from hsi_retarget.humanoid_ik import Footsteps, plan_footsteps
@@ -93,6 +94,19 @@ def frame_targets(
     )
 
 
+def _slid(targets: IKTargets, handles: Sequence[HandleHold], i: int, q: F64, robot: RobotModel) -> IKTargets:
+    """``targets`` with the goals of the hands holding a handle at frame ``i`` slid along the part's arc
+    towards where their TCP is at ``q`` (:meth:`~hsi_retarget.handle_hold.HandleHold.target`)."""
+    tcp = dict(targets.tcp)
+    for h in handles:
+        if h.hand in tcp and h.slack[i] > 0.0:
+            frame = robot.tcp_frames[h.hand]
+            goal = h.target(i, robot.fk(q, (frame,))[frame][:3, 3])
+            if goal is not None:
+                tcp[h.hand] = goal
+    return replace(targets, tcp=tcp)
+
+
 def track(
     goals: RobotGoals,
     robot: RobotModel,
@@ -106,6 +120,7 @@ def track(
     resume: tuple[int, Trace] | None = None,
     objects: Mapping[str, trimesh.Trimesh] | None = None,
     stop: int | None = None,
+    handles: Sequence[HandleHold] = (),
 ) -> tuple[F64, dict[str, F64], dict[str, F64], dict[str, Any]]:
     """Frame-by-frame IK of ``goals``: configurations (T, nq), TCP position [m] and orientation [rad] errors
     per side (T,) (NaN where inactive) and diagnostics (fallbacks, clearance, footsteps; with ``events``
@@ -124,7 +139,9 @@ def track(
     of the free objects; with ``events``, each one grasped is collision geometry of its hand from the
     frame its grasp was reached (within ``cfg.held_reach``) until its release
     (:mod:`hsi_retarget.held_object`; ``diag["held"]`` lists them). ``stop``: track only the frames before
-    it (the later rows stay zero, their errors NaN; with ``trace`` a later call can ``resume`` from it)."""
+    it (the later rows stay zero, their errors NaN; with ``trace`` a later call can ``resume`` from it).
+    ``handles``: holds of a handle whose goal slides along the part's arc towards the holder's TCP while
+    the part stands open (:mod:`hsi_retarget.handle_hold`)."""
     n = goals.t.shape[0]
     planned = resume[1].feet if resume is not None else None
     feet = planned if planned is not None else footstep_plan(robot, goals, cfg, part)
@@ -190,6 +207,8 @@ def track(
             if np.isfinite(goals.finger[s][i]):
                 q[idx] = goals.finger[s][i]
         targets = frame_targets(goals, i, feet, layer[1], arm)
+        if handles:
+            targets = _slid(targets, handles, i, q, robot)
         errors: tuple[dict[str, float], dict[str, float]] | None = None  # those of q, once measured
         if i == 0:
             result = solver.solve(q, targets, cfg.initial_iterations)

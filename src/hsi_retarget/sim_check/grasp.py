@@ -34,6 +34,7 @@ import numpy as np
 
 from hsi_planning.errors import ConfigError, RetargetError
 from hsi_retarget.joint_trajectory import ContactEvent
+from hsi_retarget.sim_check.handle_grip import pivot
 from hsi_retarget.sim_check.mjcf import HANDS
 from hsi_retarget.sim_check.world import SimWorld
 
@@ -90,7 +91,10 @@ class GraspController:
         self.records: list[GraspRecord] = []
         self._target_geoms: dict[str, np.ndarray] = {}
         for (hand, target), eq in world.welds.items():  # welds left on by a previous execution: still held
-            if world.data.eq_active[eq]:
+            if (
+                world.data.eq_active[eq]
+                or world.data.eq_active[list(world.pivots.get((hand, target), ()))].any()
+            ):
                 self.held[hand] = target
                 self.finger_command[hand] = self.closed_value[hand]
 
@@ -143,6 +147,8 @@ class GraspController:
         target = self.held.pop(hand, "")
         if target:
             self.world.data.eq_active[self.world.welds[(hand, target)]] = 0
+            for eq in self.world.pivots.get((hand, target), ()):
+                self.world.data.eq_active[eq] = 0
             self.released[hand] = (target, time)
             self.records.append(GraspRecord(time, hand, target, "release"))
 
@@ -235,6 +241,13 @@ class GraspController:
         m, d = w.model, w.data
         mujoco.mj_kinematics(m, d)
         b1, b2 = w.gripper_body[hand], w.body_ids[target]
+        pins = w.pivots.get((hand, target))
+        if pins is not None and target in w.bar_axes:  # a handle bar: held, free to turn about its axis
+            pivot(
+                m, d, pins=pins, bodies=(b1, b2), tcp=d.geom_xpos[w.tcp_probe[hand]], axis=w.bar_axes[target]
+            )
+            self.held[hand] = target
+            return
         rot1, rot2 = d.xmat[b1].reshape(3, 3), d.xmat[b2].reshape(3, 3)
         anchor = d.geom_xpos[w.tcp_probe[hand]] if w.target_kind(target) == "part" else d.xpos[b2]
         inv = np.zeros(4)

@@ -3,12 +3,15 @@
 Per hand, an invisible sphere without collisions sits at the TCP site (``<hand>_tcp_probe``, for distance
 queries), and one inactive ``equality weld`` joins the hand's gripper link to every graspable body (free
 objects, doors, drawers), named ``grasp:<hand>:<body>``; :mod:`hsi_retarget.sim_check.grasp` sets its
-relative pose and switches it on.
+relative pose and switches it on. For the doors and drawers named as ``pivots`` there are also two inactive
+``equality connect`` constraints per hand (``grasp:<hand>:<body>:pivot<k>``), which together hold the
+handle bar in the gripper but let it turn about its own axis (:mod:`hsi_retarget.sim_check.handle_grip`).
 """
 
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
+from collections.abc import Sequence
 
 from hsi_planning.errors import SceneError
 from hsi_retarget.robots import RobotModel
@@ -22,9 +25,21 @@ def weld_name(hand: str, body: str) -> str:
     return f"grasp:{hand}:{body}"
 
 
-def add_probes_and_welds(xml: str, robot: RobotModel, targets: list[str], solref: tuple[float, float]) -> str:
+def pivot_name(hand: str, body: str, k: int) -> str:
+    """Name of the ``k``-th (0 or 1) handle pivot constraint between ``hand``'s gripper and part ``body``."""
+    return f"{weld_name(hand, body)}:pivot{k}"
+
+
+def add_probes_and_welds(
+    xml: str,
+    robot: RobotModel,
+    targets: list[str],
+    solref: tuple[float, float],
+    pivots: Sequence[str] = (),
+) -> str:
     """``xml`` (a scene with ``robot`` attached, no prefix) plus TCP probes and grasp welds to ``targets``
-    (body names); ``solref``: the welds' time constant [s] and damping ratio [-].
+    (body names), and handle pivot pairs to the ``pivots`` (part body names); ``solref``: their time
+    constant [s] and damping ratio [-].
 
     Raises:
         SceneError: the TCP sites are missing.
@@ -62,4 +77,15 @@ def add_probes_and_welds(xml: str, robot: RobotModel, targets: list[str], solref
                 active="false",
                 solref=f"{solref[0]} {solref[1]}",
             )
+        for body in pivots:
+            for k in (0, 1):
+                pin = ET.SubElement(equality, "connect")
+                pin.attrib.update(
+                    name=pivot_name(hand, body, k),
+                    body1=frame_links[robot.tcp_frames[hand]],
+                    body2=body,
+                    anchor="0 0 0",
+                    active="false",
+                    solref=f"{solref[0]} {solref[1]}",
+                )
     return ET.tostring(root, encoding="unicode")

@@ -23,8 +23,10 @@ from hsi_planning.scene import SceneSpec, articulated_parts, build_mjcf, object_
 from hsi_planning.scene_paths import load_scene
 from hsi_retarget.robots import RobotModel, attach_robot
 from hsi_retarget.robots.mujoco_map import MujocoMap
-from hsi_retarget.sim_check.mjcf import HANDS, add_probes_and_welds, weld_name
+from hsi_retarget.sim_check.handle_grip import bar_axes
+from hsi_retarget.sim_check.mjcf import HANDS, add_probes_and_welds, pivot_name, weld_name
 
+_EQ = mujoco.mjtObj.mjOBJ_EQUALITY
 ANCHOR_WELD = "pelvis_anchor_weld"  #: mocap weld of floating robots (see :mod:`hsi_retarget.robots`)
 
 #: Geom kinds in :attr:`SimWorld.geom_kind`.
@@ -49,6 +51,12 @@ class WorldConfig:
     #: time constant below two physics steps is raised to that by MuJoCo). 4 ms instead of the model's 20 ms
     #: cut the humanoid's static hand error from 12-20 mm to about 5 mm (the soft weld let the root tilt)
     anchor_solref: tuple[float, float] = (0.004, 1.0)
+    #: a held door's or drawer's handle bar may turn about its own axis in the gripper (two connect
+    #: constraints, :mod:`hsi_retarget.sim_check.handle_grip`) instead of being welded to it [-]. ``None``:
+    #: on for a floating robot (the humanoid, whose compliant arms and trunk shook under the weld's strain),
+    #: off for a fixed one (the dual arm's stiff arms: with it, 2 of its 100 benchmark episodes lost, none
+    #: gained)
+    handle_pivot: bool | None = None
 
     def __post_init__(self) -> None:
         if not self.scene or not self.robot:
@@ -96,7 +104,12 @@ class SimWorld:
         self.objects: tuple[str, ...] = tuple(object_names(self.spec))
         self.parts: tuple[str, ...] = tuple(articulated_parts(self.spec))
         merged = attach_robot(build_mjcf(self.spec), self.robot.name, config.base_pose)
-        self.xml = add_probes_and_welds(merged, self.robot, [*self.objects, *self.parts], config.grasp_solref)
+        pivot = config.handle_pivot if config.handle_pivot is not None else self.robot.floating
+        pivots = self.parts if pivot else ()
+        self._pivot_parts: tuple[str, ...] = pivots
+        self.xml = add_probes_and_welds(
+            merged, self.robot, [*self.objects, *self.parts], config.grasp_solref, pivots
+        )
         try:
             self.model = mujoco.MjModel.from_xml_string(self.xml)
         except ValueError as exc:
@@ -176,6 +189,13 @@ class SimWorld:
             for hand in HANDS
             for n in (*self.objects, *self.parts)
         }
+        #: (hand, part) -> its two handle pivot constraints; part -> its bar axis (body frame)
+        self.pivots = {
+            (hand, n): (self._id(_EQ, pivot_name(hand, n, 0)), self._id(_EQ, pivot_name(hand, n, 1)))
+            for hand in HANDS
+            for n in self._pivot_parts
+        }
+        self.bar_axes = bar_axes(m, self.spec, {n: self.body_ids[n] for n in self.parts})
         self.part_joint: dict[str, tuple[int, bool]] = {}
         for part in self.parts:
             j = self._id(mujoco.mjtObj.mjOBJ_JOINT, part)
@@ -204,7 +224,7 @@ class SimWorld:
         m, d = self.model, self.data
         mujoco.mj_resetDataKeyframe(m, d, 0)
         d.eq_active[:] = m.eq_active0
-        for eq in self.welds.values():
+        for eq in [*self.welds.values(), *(e for pair in self.pivots.values() for e in pair)]:
             d.eq_active[eq] = 0
         if self.anchor_weld >= 0:
             d.eq_active[self.anchor_weld] = int(self.config.pelvis_anchor)
