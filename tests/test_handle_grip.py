@@ -77,7 +77,7 @@ def test_a_kitchen_part_is_held_by_its_pivot_pair_at_the_tcp_along_its_bar() -> 
     pins = world.pivots[(hand, part)]
     assert all(d.eq_active[e] == 0 for e in pins)
     grasp = GraspController(world)
-    grasp._weld(hand, part)
+    assert grasp._weld(hand, part) == "pivot"
     assert grasp.held[hand] == part and d.eq_active[world.welds[(hand, part)]] == 0
     b1, b2 = world.gripper_body[hand], world.body_ids[part]
     tcp = d.geom_xpos[world.tcp_probe[hand]]

@@ -347,6 +347,7 @@ def test_door_opened_by_pulling_the_handle() -> None:
     s.event("right", "release", part).hold(0.3)
     report = execute(world, s.build(), goal=TaskGoal(open_part=part))
     assert report.grasps[0].kind == "grasp" and report.grasps[0].target == part
+    assert report.grasps[0].hold == "weld" and f"grasps {part} at" in report.to_markdown()  # the dual arm
     assert report.opening is not None and report.opening >= math.radians(60.0)
     assert report.opening_required == pytest.approx(math.radians(60.0))
     assert report.success and report.collisions == 0, report.failures
@@ -384,7 +385,7 @@ def test_a_part_is_welded_at_the_tcp_and_a_free_object_at_its_origin() -> None:
     grasp = GraspController(world)
     m, d = world.model, world.data
     for hand, target in (("right", "drawer_unit1/drawer1"), ("left", "can1")):
-        grasp._weld(hand, target)
+        assert grasp._weld(hand, target) == "weld"
         eq = world.welds[(hand, target)]
         b1, b2 = world.gripper_body[hand], world.body_ids[target]
         on_gripper = d.xmat[b1].reshape(3, 3) @ m.eq_data[eq, 3:6] + d.xpos[b1]

@@ -14,6 +14,13 @@ opening whose arc point is nearest to the planned position,
 planned goal over ``ease_s`` after the release. Only a hold that opens the part is reshaped (its grasp
 comes before the opening arc ends, with the part closed); a hand that takes the handle of a part another
 hand opened is left as planned.
+
+While the part stands open (between its opening and closing arcs, eased in and out), the goal may also
+slide up to ``slack`` of the opening *further open*, towards the opening nearest to where the holder's
+tracked TCP is (:meth:`HandleHold.target`, applied frame by frame in :func:`~hsi_retarget.tracking.track`):
+the door or drawer gives way to a holder stretched by the other hand's reach instead of the holder's pose
+giving way. Never less open: a door closed a little put its panel in the way of the arm reaching past it
+(humanoid cabinet_bottle/reshape/1: the bottle grasp then missed by 8.6 cm).
 """
 
 from __future__ import annotations

@@ -70,6 +70,9 @@ class GraspRecord:
     target: str  #: object or door/drawer body name
     kind: str  #: ``grasp`` | ``release`` | ``failed``
     how: str = ""  #: ``contact`` (both fingers) or ``proximity`` (TCP close) for ``grasp``
+    #: how a ``grasp`` holds: ``weld`` (rigidly) or ``pivot`` (a handle bar free to turn about its axis,
+    #: :mod:`hsi_retarget.sim_check.handle_grip`)
+    hold: str = ""
 
 
 class GraspController:
@@ -182,13 +185,13 @@ class GraspController:
         for hand, (target, since) in list(self.pending.items()):
             how = self._touch(hand, target)
             if how:
-                self._weld(hand, target)
+                hold = self._weld(hand, target)
                 if self.config.stop_fingers:  # a force-limited gripper stops on the object
                     stop = self._finger_now.get(hand)
                     if stop is not None:
                         self.finger_command[hand] = stop
                 del self.pending[hand]
-                self.records.append(GraspRecord(time, hand, target, "grasp", how))
+                self.records.append(GraspRecord(time, hand, target, "grasp", how, hold))
             elif time - since > self.config.timeout_s:
                 del self.pending[hand]
                 self.records.append(GraspRecord(time, hand, target, "failed"))
@@ -233,10 +236,11 @@ class GraspController:
         theirs = np.isin(pairs, self._geoms(target))
         return bool(((own[:, 0] & theirs[:, 1]) | (own[:, 1] & theirs[:, 0])).any())
 
-    def _weld(self, hand: str, target: str) -> None:
+    def _weld(self, hand: str, target: str) -> str:
         """Weld ``target`` to ``hand``'s gripper at their current relative pose. A free object's weld point
         is its origin; a door's or drawer's is the TCP, where the hand pulls its handle: the joint then
-        follows the point the trajectory moves along its arc, not a point off the gripper."""
+        follows the point the trajectory moves along its arc, not a point off the gripper. A handle with a
+        pivot pair (:attr:`SimWorld.pivots`) is held by it instead. Returns ``weld`` or ``pivot``."""
         w = self.world
         m, d = w.model, w.data
         mujoco.mj_kinematics(m, d)
@@ -247,7 +251,7 @@ class GraspController:
                 m, d, pins=pins, bodies=(b1, b2), tcp=d.geom_xpos[w.tcp_probe[hand]], axis=w.bar_axes[target]
             )
             self.held[hand] = target
-            return
+            return "pivot"
         rot1, rot2 = d.xmat[b1].reshape(3, 3), d.xmat[b2].reshape(3, 3)
         anchor = d.geom_xpos[w.tcp_probe[hand]] if w.target_kind(target) == "part" else d.xpos[b2]
         inv = np.zeros(4)
@@ -260,3 +264,4 @@ class GraspController:
         m.eq_data[eq, 6:10] = rel  # body2 orientation relative to body1
         d.eq_active[eq] = 1
         self.held[hand] = target
+        return "weld"

@@ -176,6 +176,11 @@ class ExecutionReport:
             )
         if self.failures:
             lines += ["", "Failures: " + "; ".join(self.failures)]
+        holds = {"weld": "welded on contact", "pivot": "its bar free to turn in the gripper"}
+        for g in self.grasps:
+            if g.kind == "grasp":
+                how = f" ({holds[g.hold]})" if g.hold in holds else ""
+                lines.append(f"- {g.hand} hand grasps {g.target} at {g.time_s:.2f} s{how}")
         for c in self.collision_details:
             lines.append(
                 f"- collision {c.robot_geom} ↔ {c.other_geom} at {c.first_time_s:.2f} s, "
