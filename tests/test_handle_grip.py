@@ -8,6 +8,7 @@ import mujoco
 import numpy as np
 import pytest
 
+from hsi_retarget.joint_trajectory import ContactEvent
 from hsi_retarget.sim_check import WorldConfig, build_world
 from hsi_retarget.sim_check.grasp import GraspController
 from hsi_retarget.sim_check.handle_grip import PIVOT_HALF_SPAN, pivot
@@ -91,7 +92,7 @@ def test_a_kitchen_part_is_held_by_its_pivot_pair_at_the_tcp_along_its_bar() -> 
         ends.append(on_gripper)
     np.testing.assert_allclose((ends[0] + ends[1]) / 2.0, tcp, atol=1e-9)  # centred on the TCP
     np.testing.assert_allclose(ends[1] - ends[0], 2.0 * PIVOT_HALF_SPAN * bar, atol=1e-9)  # along the bar
-    grasp.command(type("E", (), {"hand": hand, "kind": "release", "object_name": part})(), 0.0)
+    grasp.command(ContactEvent(0.0, hand, "release", part), 0.0)
     assert all(d.eq_active[e] == 0 for e in pins) and hand not in grasp.held
     world.reset()
 

@@ -117,16 +117,16 @@ def hold_handle(
         r = int(np.searchsorted(t, t_release, side="left")) if math.isfinite(t_release) else t.shape[0]
         start = tcp[hand][g].copy()
         arc = HandleArc(part.motion, start[:3, 3])
-        planned = np.full(t.shape, np.nan)
         span = max(ease_s, 1e-9)
+        weight = 1.0 - ease((t - t_release) / span)  # 1 up to the release, then eased out (inf: never)
+        frames = np.flatnonzero((t > t[g]) & (weight > 0.0))
+        planned = np.full(t.shape, np.nan)
+        planned[frames] = [arc.nearest(tcp[hand][i, :3, 3]) for i in frames]
         rise = ease((t - part.t_open) / span) * (1.0 - ease((t - part.t_close + span) / span))
         hold = HandleHold(hand, g, r, start, planned, slack * rise, arc, part.motion)
-        late = (t - t_release) / span if math.isfinite(t_release) else np.full(t.shape, -1.0)
-        weight = np.where(t < t_release, 1.0, 1.0 - ease(late))
         moved_p, moved_deg = 0.0, 0.0
-        for i in np.flatnonzero((t > t[g]) & (weight > 0.0)):
+        for i in frames:
             plan = tcp[hand][i]
-            planned[i] = arc.nearest(plan[:3, 3])
             held, w = hold.pose(planned[i]), float(weight[i])
             pose = held.copy()
             if w < 1.0:  # easing back to the plan after the release

@@ -189,13 +189,13 @@ class SimWorld:
             for hand in HANDS
             for n in (*self.objects, *self.parts)
         }
-        #: (hand, part) -> its two handle pivot constraints; part -> its bar axis (body frame)
+        #: (hand, part) -> its two handle pivot constraints; part held that way -> its bar axis (body frame)
         self.pivots = {
             (hand, n): (self._id(_EQ, pivot_name(hand, n, 0)), self._id(_EQ, pivot_name(hand, n, 1)))
             for hand in HANDS
             for n in self._pivot_parts
         }
-        self.bar_axes = bar_axes(m, self.spec, {n: self.body_ids[n] for n in self.parts})
+        self.bar_axes = bar_axes(m, self.spec, {n: self.body_ids[n] for n in self._pivot_parts})
         self.part_joint: dict[str, tuple[int, bool]] = {}
         for part in self.parts:
             j = self._id(mujoco.mjtObj.mjOBJ_JOINT, part)
