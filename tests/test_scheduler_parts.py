@@ -20,6 +20,7 @@ from hsi_planning.scheduler import (
     BodyConfig,
     CloudObstacles,
     FloorMap,
+    HandConfig,
     HandState,
     HipPose,
     Keyframe,
@@ -38,6 +39,7 @@ from hsi_planning.scheduler import (
     choose_stance,
     deviation_cost,
     enclosing_part,
+    hand_crossing,
     plan_root_path,
     ray_hit,
     resolve_click,
@@ -319,6 +321,26 @@ def test_deviation_cost_eq24_counts_arm_motion_not_walking() -> None:
         ),
     )
     assert deviation_cost(reach, 2.0) == pytest.approx(0.5 + 2.0)  # 0.5 m of left-arm motion + 2 m/s * 1 s
+
+
+def test_hand_crossing_in_the_hip_heading_frame() -> None:
+    apart = Schedule("a", tuple(_frames(0.0, [0, 0, 1], [0.3, 0.2, 1], [0.3, -0.2, 1])))
+    assert hand_crossing(apart) == pytest.approx(-0.4)  # the left wrist 0.4 m left of the right one
+    # facing -y (hip turned -90 deg), left is +x: the left wrist at world x = 0.15 lies 0.1 m right of the
+    # right one at x = 0.25
+    q = Rotation.from_euler("z", -90, degrees=True).as_quat()
+    crossed = Schedule(
+        "c",
+        (
+            Keyframe(0.0, "left_wrist", [0.15, -0.3, 1], q, "hold", hand="left"),
+            Keyframe(0.0, "right_wrist", [0.25, -0.3, 1], q, "reach", hand="right"),
+            Keyframe(0.0, "hip", [0, 0, 1], q, "idle"),
+            Keyframe(0.0, "root", [0, 0, 0], q, "idle"),
+        ),
+    )
+    assert hand_crossing(crossed) == pytest.approx(0.1)
+    with pytest.raises(ConfigError, match="max_crossing"):
+        HandConfig(max_crossing=-0.1)
 
 
 # ---------------------------------------------------------------------------------------- schedule

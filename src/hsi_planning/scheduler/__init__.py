@@ -22,6 +22,7 @@ from hsi_planning.scheduler.hands import (
     HandState,
     candidate_assignments,
     deviation_cost,
+    hand_crossing,
 )
 from hsi_planning.scheduler.linear_planner import LinearPlanner
 from hsi_planning.scheduler.navigation import FloorMap, NavigationConfig, approach_cost, plan_root_path
@@ -68,6 +69,7 @@ __all__ = [
     "enclosing_part",
     "find_blockers",
     "free_spots",
+    "hand_crossing",
     "plan_root_path",
     "ray_hit",
     "resolve_click",

@@ -30,6 +30,7 @@ from hsi_planning.scene.objects import DEFAULTS
 from hsi_planning.scheduler.actions import TaskRun
 from hsi_planning.scheduler.auxiliary import FRONT_RISE, approach_axis, free_pose
 from hsi_planning.scheduler.reach_planner import contact_from_points
+from hsi_planning.scheduler.schedule import ContactEvent
 from hsi_planning.scheduler.stance import StanceTarget
 from hsi_planning.scheduler.world import WorldState, label_points
 from hsi_planning.trajectory import Action, Hand, WristTrajectory
@@ -38,6 +39,8 @@ F64 = NDArray[np.float64]
 _UP = np.array([0.0, 0.0, 1.0])
 #: [m] room beyond the retreat's rise that a held object needs under the board above it to rise in place
 _TALL_ROOM = 0.02
+#: [m] how far the bottom of an object taken out from above clears the highest point of its container
+_RIM_ROOM = 0.05
 #: [m] points of a round object farther than this outside its fitted cylinder are a protrusion (handle).
 _HANDLE_GAP = 0.01
 #: [-] fraction of 10-degree sectors around a round object's fitted axis its points must cover for the
@@ -142,13 +145,21 @@ def _axes(
 
 
 def _retreats(
-    run: TaskRun, contacts: dict[Hand, F64], axis: F64, support_name: str, held: F64 | None = None
+    run: TaskRun,
+    contacts: dict[Hand, F64],
+    axis: F64,
+    support_name: str,
+    *,
+    held: F64 | None = None,
+    cloud: LabelledCloud | None = None,
 ) -> dict[Hand, F64]:
     """Free wrist poses after a front or top access: out of the opening by ``retreat_clearance`` beyond
     the wrist, slightly raised. Taking out an object that cannot rise that much under the board above
     it (``held``: its points (M, 3) [m]; headroom below the rise + ``_TALL_ROOM``), beyond the deepest of
     its points instead: a tall bottle reaches deeper into the shelf than the wrist holding it by its near
-    side, and only clears the board once all of it is out."""
+    side, and only clears the board once all of it is out. Taken out from above, the object rises at
+    least until its bottom is ``_RIM_ROOM`` above the highest point of its container in ``cloud`` (a
+    drawer's front panel reaches higher than its walls): the hands carry it back over that rim."""
     c = run.config
     if len(contacts) == 2:
         towards = run.timeline.hip.position - np.mean(list(contacts.values()), axis=0)
@@ -157,6 +168,11 @@ def _retreats(
         return {h: p + c.lift_height * 2.0 * _UP + 0.15 * towards for h, p in contacts.items()}
     support = support_surface(run.world.spec, support_name)
     front = support.frame[:3, 3] + support.half_extents[0] * support.opening
+    rise = c.retreat_clearance + 0.1  # [m] above the contact, of a top access
+    if cloud is not None and held is not None and len(held):
+        rim = label_points(cloud, [support.body])
+        if len(rim):
+            rise = max(rise, float(rim[:, 2].max()) + _RIM_ROOM - float(held[:, 2].min()))
     deepest = 0.0  # [m] how far behind the front the held object reaches when it cannot rise in place
     if (
         held is not None
@@ -167,7 +183,7 @@ def _retreats(
     out = {}
     for h, p in contacts.items():
         if abs(axis[2]) > 0.9:
-            out[h] = free_pose(p, axis, c.retreat_clearance + 0.1)
+            out[h] = free_pose(p, axis, rise)
         else:
             depth = max(0.0, float((front - p) @ axis), deepest)
             out[h] = free_pose(p, axis, depth + c.retreat_clearance)
@@ -231,7 +247,7 @@ def grasp(run: TaskRun, obj: str, hands: tuple[Hand, ...]) -> None:
     axis = approach_axis(run.world, support)
     axes = _axes(run, axis, pts, hands, cloud=cloud, obj=obj)
     contacts = {h: contact_from_points(pts, a, c.auxiliary.palm_offset)[0] for h, a in axes.items()}
-    retreats = _retreats(run, contacts, axis, support.name, held=pts)
+    retreats = _retreats(run, contacts, axis, support.name, held=pts, cloud=cloud)
     targets = [StanceTarget(h, p) for h in hands for p in (contacts[h], retreats[h])]
     floor = run.floor()
     stance = run.stance([*targets, *run.holds()], floor)
@@ -250,6 +266,8 @@ def grasp(run: TaskRun, obj: str, hands: tuple[Hand, ...]) -> None:
         tl.wrists[h].holding = obj
     tl.planned(leaves, "take_out", "take_out", "", obj)
     tl.step(f"take {obj} out")
+    if len(hands) == 1 and abs(axis[2]) > 0.9 and support.body in run.world.parts:
+        _carry_over_rim(run, hands[0])
     if len(hands) == 2:  # carry the object in front of the body, the hands keeping their grip
         run.grips[obj] = (axes, {h: approaches[h].position[-1] - bottom_centre(pts, kind) for h in hands})
         mid = 0.5 * (tl.position("left") + tl.position("right"))
@@ -261,6 +279,24 @@ def grasp(run: TaskRun, obj: str, hands: tuple[Hand, ...]) -> None:
         for h in hands:
             tl.wrists[h].carry_local = centre + unturn @ (tl.position(h) - mid)
     tl.attach(hands, tl.attach_time(hands, c.hand_speed, c.min_move_time), "carry")
+
+
+def _carry_over_rim(run: TaskRun, hand: Hand) -> None:
+    """The hand that took an object up out of a drawer carries it level to above its carry pose, then
+    lowers it there: straight to the carry pose it would drag the object back down through the drawer's
+    front panel, which it was lifted over."""
+    tl, c = run.timeline, run.config
+    w = tl.wrists[hand]
+    here, mode = tl.position(hand), w.mode
+    w.mode = "carry"
+    carry = tl.position(hand)
+    w.mode = mode
+    if here[2] <= carry[2]:
+        return
+    over = np.array([carry[0], carry[1], here[2]])
+    duration = max(c.min_move_time, float(np.linalg.norm(over - here)) / c.hand_speed)
+    acting: dict[Hand, tuple[str, ContactEvent, str]] = {hand: ("carry", "", w.holding)}
+    tl.move(duration, "carry", wrists={hand: (over, tl.quaternion(hand))}, acting=acting)
 
 
 def place(run: TaskRun, obj: str, hands: tuple[Hand, ...], position: F64, support_name: str) -> None:

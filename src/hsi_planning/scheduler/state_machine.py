@@ -49,6 +49,7 @@ from hsi_planning.scheduler.hands import (
     HandState,
     candidate_assignments,
     deviation_cost,
+    hand_crossing,
     needs_both_hands,
 )
 from hsi_planning.scheduler.linear_planner import LinearPlanner
@@ -138,15 +139,21 @@ class Scheduler:
         blockers = find_blockers(world, self.planner, task.target, opened, hand=probe, config=cfg.auxiliary)
         spots = {b: self._spots(b, task.target, opened) for b in blockers}
         costs: dict[str, float] = {}
+        crossed: dict[str, float] = {}
         reasons: dict[str, str] = {}
         for option in options:
             try:
                 dry = self._run(task, option, blockers, spots, LinearPlanner(cfg.auxiliary.palm_offset))
                 costs[option.describe()] = deviation_cost(dry, cfg.hands.deviation_weight)
+                if (crossing := hand_crossing(dry)) > cfg.hands.max_crossing:
+                    crossed[option.describe()] = crossing
             except PlanningError as exc:
                 reasons[option.describe()] = str(exc)
                 _LOG.debug("assignment %r is infeasible: %s", option.describe(), exc)
-        ranked = sorted((o for o in options if o.describe() in costs), key=lambda o: costs[o.describe()])
+        ranked = sorted(
+            (o for o in options if o.describe() in costs),
+            key=lambda o: (o.describe() in crossed, costs[o.describe()]),
+        )
         for option in ranked:
             try:
                 schedule = self._run(task, option, blockers, spots, self.planner)
@@ -161,6 +168,7 @@ class Scheduler:
                 "part": part or "",
                 "blockers": blockers,
                 "costs": costs,
+                "crossed": crossed,
                 "rejected": reasons,
                 "deviation_cost": deviation_cost(schedule, cfg.hands.deviation_weight),
                 "planner": self.planner.name,

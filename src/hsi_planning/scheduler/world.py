@@ -3,9 +3,10 @@
 The observed cloud shows the scene at rest (doors and drawers closed). For a state with parts opened the
 world *predicts* the cloud by rendering the scene's MuJoCo model with those joints set (a door swung to
 ``door_fraction`` of its range, a drawer pulled to ``drawer_fraction`` of its travel, the objects in the
-drawer moved along), the way a person expects the cabinet to look once opened. Objects that were moved
-by the task (blockers put aside) are shifted in the cloud and held objects are taken out of it
-(:meth:`SceneWorld.state_cloud`).
+drawer moved along), the way a person expects the cabinet to look once opened; what the cameras saw of an
+opened part at rest moves with it into that cloud (they may not see a pulled-out drawer's front). Objects
+that were moved by the task (blockers put aside) are shifted in the cloud and held objects are taken out
+of it (:meth:`SceneWorld.state_cloud`).
 """
 
 from __future__ import annotations
@@ -217,8 +218,29 @@ class SceneWorld:
         if unknown:
             raise SceneError(f"cannot open {unknown}: not doors or drawers; valid: {sorted(self._parts)}")
         if key not in self._clouds:
-            self._clouds[key] = self._render(key)
+            rendered = self._render(key)
+            self._clouds[key] = self._with_seen_parts(rendered, key) if key else rendered
         return self._clouds[key]
+
+    def _with_seen_parts(self, cloud: LabelledCloud, opened: frozenset[str]) -> LabelledCloud:
+        """``cloud`` plus what the cameras saw of each ``opened`` part at rest, moved with it: from where
+        they stand they may not see a pulled-out drawer's front or a swung door's panel, which are still
+        there (a planner would reach through the hole)."""
+        rest = self.cloud(())
+        seen = {v: k for k, v in (rest.label_names or {}).items()}
+        ids = {v: k for k, v in (cloud.label_names or {}).items()}
+        points, labels = [cloud.points], [cloud.labels]
+        for name in sorted(opened):
+            if name not in seen or name not in ids:
+                continue
+            m = self.part_transform(name, 1.0)
+            pts = rest.points[rest.labels == seen[name]]
+            points.append(pts @ m[:3, :3].T + m[:3, 3])
+            labels.append(np.full(len(pts), ids[name], dtype=cloud.labels.dtype))
+        if len(points) == 1:
+            return cloud
+        merged = np.concatenate(labels)
+        return LabelledCloud(np.vstack(points), merged, cloud.label_names, cloud.label_classes)
 
     def _render(self, opened: frozenset[str]) -> LabelledCloud:
         import mujoco
