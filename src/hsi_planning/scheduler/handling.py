@@ -169,7 +169,7 @@ def _retreats(
     support = support_surface(run.world.spec, support_name)
     front = support.frame[:3, 3] + support.half_extents[0] * support.opening
     rise = c.retreat_clearance + 0.1  # [m] above the contact, of a top access
-    if cloud is not None and held is not None and len(held):
+    if abs(axis[2]) > 0.9 and cloud is not None and held is not None and len(held):
         rim = label_points(cloud, [support.body])
         if len(rim):
             rise = max(rise, float(rim[:, 2].max()) + _RIM_ROOM - float(held[:, 2].min()))
@@ -286,16 +286,12 @@ def _carry_over_rim(run: TaskRun, hand: Hand) -> None:
     lowers it there: straight to the carry pose it would drag the object back down through the drawer's
     front panel, which it was lifted over."""
     tl, c = run.timeline, run.config
-    w = tl.wrists[hand]
-    here, mode = tl.position(hand), w.mode
-    w.mode = "carry"
-    carry = tl.position(hand)
-    w.mode = mode
+    here, carry = tl.position(hand), tl.attached(hand)
     if here[2] <= carry[2]:
         return
     over = np.array([carry[0], carry[1], here[2]])
     duration = max(c.min_move_time, float(np.linalg.norm(over - here)) / c.hand_speed)
-    acting: dict[Hand, tuple[str, ContactEvent, str]] = {hand: ("carry", "", w.holding)}
+    acting: dict[Hand, tuple[str, ContactEvent, str]] = {hand: ("carry", "", tl.wrists[hand].holding)}
     tl.move(duration, "carry", wrists={hand: (over, tl.quaternion(hand))}, acting=acting)
 
 

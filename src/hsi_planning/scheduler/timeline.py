@@ -168,14 +168,18 @@ class Timeline:
 
     def attach_time(self, hands: Sequence[Hand], speed: float, minimum: float) -> float:
         """[s] time to bring ``hands`` back to the body at ``speed`` [m/s] (at least ``minimum``)."""
-        longest = 0.0
-        for hand in hands:
-            w = self.wrists[hand]
-            here, mode = self.position(hand), w.mode
-            w.mode = "carry" if w.holding else "ready"
-            longest = max(longest, float(np.linalg.norm(self.position(hand) - here)))
+        gaps = [float(np.linalg.norm(self.attached(h) - self.position(h))) for h in hands]
+        return max(minimum, max(gaps, default=0.0) / speed)
+
+    def attached(self, hand: Hand) -> F64:
+        """(3,) [m] where ``hand``'s wrist goes when brought back to the body: the carry pose while it
+        holds an object, else the ready pose."""
+        w = self.wrists[hand]
+        mode, w.mode = w.mode, "carry" if w.holding else "ready"
+        try:
+            return self.position(hand)
+        finally:
             w.mode = mode
-        return max(minimum, longest / speed)
 
     def planned(
         self,
