@@ -58,3 +58,39 @@ def test_the_moving_part_is_posed_anew_when_on_and_stands_still_by_default_on_a_
 def test_a_bad_rounding_step_is_refused() -> None:
     with pytest.raises(ConfigError, match="step"):
         PartArcs(_phase(DRAWER), np.arange(10) / 24.0, RobotModel("dual_ur5e"), step=0.0)
+
+
+def test_frame_layers_are_the_part_scenes_the_tracking_heeded() -> None:
+    from hsi_retarget.part_arcs import frame_layers
+
+    robot, phase, goals, solver = _pulled_drawer()  # held 1-4.8 s, pulled to 0.6 of its travel by 2 s
+    for moving in (False, True):
+        seen: list[tuple[float | None, str]] = []
+        set_scene = solver.set_part_scene
+
+        def spy(scene: SceneDistance | None, holder: str = "", seen: list = seen) -> None:  # type: ignore[type-arg]
+            seen.append((_probe(scene), holder))
+            set_scene(scene, holder)
+
+        solver.set_part_scene = spy  # type: ignore[method-assign]
+        qs, _, _, diag = track(goals, robot, solver, RetargetConfig(moving_part=moving), part=phase)
+        del solver.set_part_scene
+        layers = frame_layers(diag["part"], goals.t, qs, robot, moving)
+        assert len(layers) == goals.t.shape[0]
+        assert layers[0] == (None, "")  # before the opening
+        heeded = _runs([(_probe(s), h) for s, h in layers])
+        assert heeded[1:] == _runs(seen) and seen[-1] == (None, "")  # the same, and cleared at the end
+        held = [h for s, h in layers if s is not None]
+        assert held and set(held) == {"right"}  # the holder's hand is exempt while the part is a layer
+        assert len(heeded) > (5 if moving else 2)  # posed anew as the hand pulls it, or standing open
+
+
+def _runs(values: list[tuple[float | None, str]]) -> list[tuple[float | None, str]]:
+    return [v for k, v in enumerate(values) if k == 0 or values[k - 1] != v]
+
+
+def _probe(scene: SceneDistance | None) -> float | None:
+    """[m] the distance of a point in front of the drawer unit to ``scene``, rounded to 0.1 mm."""
+    if scene is None:
+        return None
+    return round(float(scene.query(np.array([[0.5, -0.3, 0.75]]))[0][0]), 4)

@@ -9,6 +9,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from hsi_planning.errors import RetargetError
 from hsi_planning.scene_paths import load_scene
 from hsi_planning.scheduler.world import SceneWorld
 from hsi_retarget.arm_branch import ArmBranch
@@ -149,3 +150,30 @@ def test_a_grasp_of_what_the_drawer_holds_follows_the_drawer_as_it_was_pulled() 
     assert np.all(np.linalg.norm(np.diff(shift, axis=0), axis=1) < 0.2 * np.linalg.norm(moved))  # no jumps
     np.testing.assert_array_equal(out.tcp["right"], goals.tcp["right"])  # can1 is not in the drawer
     assert follow_part(goals, phase, grasp) is goals  # pulled as scheduled: nothing moves
+
+
+def test_the_part_keeps_its_padding_wherever_it_is_posed() -> None:
+    """The opened part is grown by ``padding`` (where the holder's hand put it is known only that well):
+    every distance and lower bound is that much smaller, posed anywhere; a bad padding is refused."""
+    spec = load_scene("kitchen")
+    plain = _phase(DRAWER)
+    schedule = SimpleNamespace(
+        info={"part": DRAWER, "door_hand": "right"},
+        keyframes=[
+            SimpleNamespace(time=t, hand="right", action=a, object_name=DRAWER, contact_event="")
+            for t, a in ((1.0, "reach"), (2.0, "open"), (4.0, "close"))
+        ],
+    )
+    padded = opened_part(schedule, spec, padding=0.005)  # type: ignore[arg-type]
+    assert padded is not None and padded.scene.padding == 0.005 and plain.scene.padding == 0.0
+    points = np.random.default_rng(5).uniform([0.0, -0.6, 0.3], [0.8, 0.6, 1.0], (50, 3))
+    for f in (1.0, 0.4):
+        a, b = plain.posed(f).scene, padded.posed(f).scene
+        assert b.padding == 0.005
+        np.testing.assert_allclose(b.query(points)[0], a.query(points)[0] - 0.005, atol=1e-6)
+        np.testing.assert_allclose(b.query(points)[1], a.query(points)[1], atol=1e-6)
+        np.testing.assert_allclose(b.lower_bound(points), a.lower_bound(points) - 0.005, atol=1e-6)
+        assert np.all(b.lower_bound(points) <= b.query(points)[0] + 1e-9)  # still a lower bound
+    for bad in (-0.001, float("nan"), float("inf")):
+        with pytest.raises(RetargetError, match="padding"):
+            SceneDistance(dict(plain.meshes or {}), padding=bad)

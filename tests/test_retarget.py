@@ -561,6 +561,62 @@ def test_smoothing_keeps_the_path_where_it_costs_no_clearance(dual: RobotModel) 
     assert np.abs(np.diff(path[:, arm], axis=0)).max() < np.abs(np.diff(raw[:, arm], axis=0)).max()
 
 
+def test_smoothing_restores_the_frames_where_it_cuts_into_an_opened_part(dual: RobotModel) -> None:
+    """Raw IK chatter between two poses of the right arm next to a door panel (a part layer): the smoothed
+    mean pose lies 3 mm inside the panel's margin, 2 mm closer than the farther raw pose. Measured with the
+    part's layer, those frames go back to the raw path; without it nothing is restored."""
+    import trimesh
+
+    from hsi_retarget.ik import IKSolver
+    from hsi_retarget.scene_distance import SceneDistance
+    from hsi_retarget.smoothing import keep_clearance, smooth_joints
+
+    n = 120
+    t = np.arange(n) / 60.0
+    elbow = dual.q_index("right_elbow_joint")
+    near, far = np.array(dual.q_home), np.array(dual.q_home)
+    near[elbow] += 0.03
+    far[elbow] -= 0.03
+    raw = np.where((np.arange(n) % 2 == 0)[:, None], near, far)  # chatter at 30 Hz
+    solver = IKSolver(dual)
+    tips = solver.sphere_centers(near) - solver.sphere_centers(far)
+    moving = int(np.argmax(np.linalg.norm(tips, axis=1)))  # the sphere the elbow moves most
+    direction = tips[moving] / np.linalg.norm(tips[moving])
+    middle = solver.sphere_centers(dual.q_home)[moving]
+
+    def panel(offset: float) -> SceneDistance:
+        box = trimesh.creation.box(extents=(0.01, 0.4, 0.4))
+        frame = np.eye(4)
+        frame[:3, 0] = direction
+        frame[:3, 1] = np.cross(direction, [0.0, 0.0, 1.0]) / np.linalg.norm(np.cross(direction, [0, 0, 1.0]))
+        frame[:3, 2] = np.cross(frame[:3, 0], frame[:3, 1])
+        frame[:3, 3] = middle + (offset + 0.005) * direction
+        box.apply_transform(frame)
+        return SceneDistance({"door": box}, ground=())
+
+    def clearance(scene: SceneDistance, q: np.ndarray) -> float:
+        solver.set_part_scene(scene, "left")
+        try:
+            return solver.clearance(q)
+        finally:
+            solver.set_part_scene(None)
+
+    lo, hi = 0.0, 0.3  # the panel offset that puts the mean pose 3 mm inside its margin
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if clearance(panel(mid), dual.q_home) < -0.003 else (lo, mid)
+    door = panel(hi)
+    assert clearance(door, far) > clearance(door, dual.q_home) + 0.002
+    layers = [(door, "left")] * n
+    smooth = smooth_joints(dual, t, raw, 8.0)
+    path, restored = keep_clearance(solver, dual, t, raw, 8.0, layers=layers)
+    assert restored > n // 4
+    assert np.abs(path - raw).max(axis=1)[n // 4 : 3 * n // 4].max() < 1e-9  # the raw path in the middle
+    ignored, none = keep_clearance(solver, dual, t, raw, 8.0)
+    assert none == 0 and np.allclose(ignored, smooth)
+    assert solver._layer is None  # the check leaves no part scene behind
+
+
 def test_frames_stop_at_the_task_residual_with_the_same_tracking(
     dual: RobotModel, monkeypatch: pytest.MonkeyPatch
 ) -> None:

@@ -66,3 +66,45 @@ def test_the_shifted_hand_keeps_its_clearance_to_the_counter(low_hand: tuple[Sim
         kept = guard.limit(q, ("left",), shift)
         assert _clearance(world, q, kept) >= CLEARANCE - 2e-4
         assert np.linalg.norm(kept) <= np.linalg.norm(shift) + 1e-9  # a projection never lengthens it
+
+
+def _arm_gap(world: SimWorld, q: np.ndarray, pairs: np.ndarray) -> float:
+    """[m] smallest distance over geom ``pairs`` (P, 2) at ``q``."""
+    m, probe = world.model, mujoco.MjData(world.model)
+    probe.qpos[:] = world.map.q_to_qpos(q, world.data.qpos)
+    mujoco.mj_kinematics(m, probe)
+    return float(min(mujoco.mj_geomDistance(m, probe, int(a), int(b), 1.0, None) for a, b in pairs))
+
+
+def test_the_shifted_arm_keeps_its_room_to_the_rest_of_the_robot() -> None:
+    """The left arm turned towards the right arm at its shoulder: planned 2 cm from it, a shift that brings
+    it 1 cm off (inside the 15 mm clearance) is refused, one away from it or none is kept."""
+    world = build_world(WorldConfig())
+    guard = ShiftGuard(world, 0.015)
+    pairs = guard._arm_pairs["left"]
+    m = world.model
+    assert len(pairs) > 0 and all(world.geom_hand[a] in (-1, 0) for a, _ in pairs)
+    names = {m.geom(int(b)).name for _, b in pairs}
+    assert any(n.startswith("right_") for n in names) and not any(n.startswith("left_") for n in names)
+    home = world.robot.q_home
+    pan = world.robot.q_index(world.robot.arm_joints["left"][0])
+
+    def turned(angle: float) -> np.ndarray:
+        q = home.copy()
+        q[pan] += angle
+        return q
+
+    sign = 1.0 if _arm_gap(world, turned(0.1), pairs) < _arm_gap(world, turned(-0.1), pairs) else -1.0
+    angles = np.linspace(0.0, 3.0, 301) * sign
+    gaps = np.array([_arm_gap(world, turned(a), pairs) for a in angles])
+    assert gaps[0] > 0.05 and gaps.min() < 0.0  # at home well apart; turned far enough, it runs into it
+
+    def at(gap: float) -> np.ndarray:
+        k = int(np.argmax(gaps < gap))
+        return turned(float(angles[k]))
+
+    plan = at(0.02)
+    assert guard.arm_room(plan, at(0.01), ("left",)) is False  # inside the 15 mm clearance, closer than planned
+    assert guard.arm_room(plan, turned(0.0), ("left",))  # away from it
+    assert guard.arm_room(at(0.01), at(0.01), ("left",))  # as planned: not pushed in further, so kept
+    assert guard.arm_room(plan, at(0.001), ()) and not guard.arm_room(plan, at(0.001), ("left",))

@@ -15,6 +15,10 @@ part stands open in :class:`PartPhase`), as far open as the holder's tracked TCP
 before (:meth:`PartPhase.reached` between the TCP at the grasp and there), rounded to ``step`` so that a
 few posed scenes serve many frames. The holder's gripper and fingers stay exempt, as while the part stands
 open.
+
+:func:`part_layer` is the part scene the IK heeds on one frame (standing open, or where the holder has
+taken it); :func:`frame_layers` lists it for every frame of a tracked path, for the checks that follow
+the tracking (:func:`~hsi_retarget.smoothing.keep_clearance`).
 """
 
 from __future__ import annotations
@@ -29,7 +33,7 @@ from hsi_retarget.part_scene import HandleArc, PartPhase
 from hsi_retarget.robots import RobotModel
 from hsi_retarget.scene_distance import SceneDistance
 
-__all__ = ["PartArcs"]
+__all__ = ["PartArcs", "frame_layers", "part_layer"]
 
 F64 = NDArray[np.float64]
 
@@ -76,3 +80,24 @@ class PartArcs:
         if scene is None:
             scene = self._posed[key] = part.posed(min(key * self.step, 1.0)).scene
         return scene, part.holder
+
+
+def part_layer(
+    part: PartPhase | None, arcs: PartArcs | None, t: F64, i: int, qs: F64
+) -> tuple[SceneDistance | None, str]:
+    """The part's scene and its exempt hand on frame ``i`` of times ``t`` (T,) [s]: where ``arcs`` (if
+    any) has the holder holding it, posed from the tracked ``qs`` (T, nq) before ``i``; else standing open
+    as :meth:`PartPhase.at` says; ``(None, '')`` without a part."""
+    now: tuple[SceneDistance | None, str] = (None, "") if part is None else part.at(float(t[i]))
+    if arcs is not None and arcs.holding(float(t[i])):
+        now = arcs.at(i, qs)
+    return now
+
+
+def frame_layers(
+    part: PartPhase | None, t: F64, qs: F64, robot: RobotModel, moving: bool
+) -> list[tuple[SceneDistance | None, str]]:
+    """:func:`part_layer` of every frame of the tracked path ``qs`` (T, nq) at ``t`` (T,) [s], with the
+    part following its holder when ``moving`` (:attr:`~hsi_retarget.retarget.RetargetConfig.moving_part`)."""
+    arcs = PartArcs(part, t, robot) if part is not None and moving else None
+    return [part_layer(part, arcs, t, i, qs) for i in range(t.shape[0])]

@@ -78,7 +78,7 @@ class PartPhase:
             copy = mesh.copy()
             copy.apply_transform(motion)
             moved[name] = copy
-        return replace(self, fraction=f, scene=SceneDistance(moved, ground=()))
+        return replace(self, fraction=f, scene=SceneDistance(moved, ground=(), padding=self.scene.padding))
 
     def reached(self, tcp_at_grasp: NDArray[np.float64], tcp_at_open: NDArray[np.float64]) -> float:
         """The opening [0..1] that moves the holder's TCP from ``tcp_at_grasp`` (3,) [m] nearest to
@@ -125,9 +125,12 @@ class HandleArc:
         return float(min(np.clip(best + np.linspace(-0.02, 0.02, 21), 0.0, 1.0), key=miss))
 
 
-def opened_part(schedule: Schedule, spec: Any, exclude: tuple[str, ...] = ()) -> PartPhase | None:
+def opened_part(
+    schedule: Schedule, spec: Any, exclude: tuple[str, ...] = (), padding: float = 0.0
+) -> PartPhase | None:
     """The :class:`PartPhase` of the part ``schedule`` opens in scene ``spec`` (``None``: no part, or no
-    opening arc); objects named in ``exclude`` (the task's targets) are not added."""
+    opening arc); objects named in ``exclude`` (the task's targets) are not added. ``padding`` [m]: the
+    part's scene is grown by it (:class:`~hsi_retarget.scene_distance.SceneDistance`)."""
     from hsi_planning.scene import scene_meshes
     from hsi_planning.scene.geometry import support_of
     from hsi_planning.scheduler.world import SceneWorld
@@ -163,7 +166,7 @@ def opened_part(schedule: Schedule, spec: Any, exclude: tuple[str, ...] = ()) ->
         float(t_open),
         float(t_free),
         float(t_close),
-        SceneDistance(moved, ground=()),
+        SceneDistance(moved, ground=(), padding=padding),
         t_grasp=float(max(reaches)) if reaches else -math.inf,
         meshes=closed,
         motion=lambda f: world.part_transform(part, f),

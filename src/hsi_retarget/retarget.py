@@ -47,6 +47,7 @@ from hsi_retarget.mapping import (
     map_to_robot,
 )
 from hsi_retarget.moved_target import moved_carries, shift_grasps
+from hsi_retarget.part_arcs import frame_layers
 from hsi_retarget.part_scene import PartPhase, opened_part
 from hsi_retarget.retrack import retrack_missed
 from hsi_retarget.robots import RobotModel
@@ -227,12 +228,12 @@ def _scene(scene: Any, motion: HumanMotion, source: Any) -> SceneDistance | None
     return SceneDistance.from_spec(scene, exclude=sorted(touched))
 
 
-def _part_phase(source: Any, scene: Any, motion: HumanMotion) -> PartPhase | None:
+def _part_phase(source: Any, scene: Any, motion: HumanMotion, padding: float) -> PartPhase | None:
     """The opened part of a schedule in a scene spec (:func:`~hsi_retarget.part_scene.opened_part`)."""
     if not (hasattr(source, "keyframes") and hasattr(scene, "furniture") and hasattr(scene, "objects")):
         return None
     targets = tuple(sorted({e.object_name for e in motion.events if e.object_name}))
-    return opened_part(cast("Schedule", source), scene, exclude=targets)
+    return opened_part(cast("Schedule", source), scene, exclude=targets, padding=padding)
 
 
 def _runs(mask: NDArray[np.bool_], t: F64, values: F64, side: str) -> list[dict[str, Any]]:
@@ -287,7 +288,7 @@ def retarget(
     goals = map_to_robot(motion, model, mapping)
     t_map = time.perf_counter() - t0
     solver = IKSolver(model, cfg.ik, _scene(scene, motion, source), cfg.support)
-    part = _part_phase(source, scene, motion)
+    part = _part_phase(source, scene, motion, cfg.ik.part_margin)
     handles: list[HandleHold] = []
     handle_holds: list[dict[str, Any]] = []
     if cfg.hold_handle if cfg.hold_handle is not None else model.floating:
@@ -325,8 +326,12 @@ def retarget(
             handles=handles,
         )
     goals = diag.pop("goals", goals)
-    diag.pop("part", None)  # the posed part: its opening is diag["part_fraction"]
-    qs, diag["smoothing_restored_frames"] = keep_clearance(solver, model, goals.t, qs, cfg.smoothing_hz)
+    posed = diag.pop("part", part)  # the posed part: its opening is diag["part_fraction"]
+    moving = cfg.moving_part if cfg.moving_part is not None else model.floating
+    layers = frame_layers(posed, goals.t, qs, model, moving) if posed is not None else None
+    qs, diag["smoothing_restored_frames"] = keep_clearance(
+        solver, model, goals.t, qs, cfg.smoothing_hz, layers=layers
+    )
     pos_err, ori_err = tcp_errors(model, goals, qs)
     t_ik = time.perf_counter() - t1
     vq, aq = np.full(model.nq, np.inf), np.full(model.nq, np.inf)

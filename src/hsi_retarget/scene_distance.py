@@ -28,10 +28,13 @@ class SceneDistance:
         meshes: Mapping[str, trimesh.Trimesh],
         exclude: Iterable[str] = (),
         ground: Iterable[str] = ("floor",),
+        padding: float = 0.0,
     ) -> None:
         """Index ``meshes`` (name -> world-frame mesh) except those named in ``exclude`` or below them
         (``cabinet1`` also drops ``cabinet1/door1``). The meshes named in ``ground`` can be left out per
-        query (:meth:`query`, :meth:`lower_bound`: a robot's base stands on the floor).
+        query (:meth:`query`, :meth:`lower_bound`: a robot's base stands on the floor). ``padding`` [m] >= 0
+        is taken off every distance: the meshes grown by it (geometry known only that well, e.g. a drawer
+        where a hand holds it).
 
         Raises:
             RetargetError: nothing left to index.
@@ -40,6 +43,9 @@ class SceneDistance:
         kept = {n: m for n, m in meshes.items() if not any(n == d or n.startswith(d + "/") for d in drop)}
         if not kept:
             raise RetargetError(f"no scene mesh left after excluding {list(drop)}")
+        if not (padding >= 0.0 and np.isfinite(padding)):
+            raise RetargetError(f"SceneDistance padding [m] must be finite and >= 0, got {padding}")
+        self.padding = float(padding)  #: [m] taken off every distance
         self.names: tuple[str, ...] = tuple(kept)
         self._scene = _raycasting(kept.values())
         lifted = [m for n, m in kept.items() if n not in set(ground)]
@@ -64,12 +70,12 @@ class SceneDistance:
         ``grounded`` (N,) is False are bounded without the ground meshes (default: all with)."""
         pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         if grounded is None or self._lifted is None:
-            return self._bound(pts, self._grid, self._scene)
+            return self._bound(pts, self._grid, self._scene) - self.padding
         raised = ~np.asarray(grounded, dtype=bool)
         bound = np.empty(pts.shape[0])
         bound[~raised] = self._bound(pts[~raised], self._grid, self._scene)
         bound[raised] = self._bound(pts[raised], self._lifted_grid, self._lifted)  # a grid of their own
-        return bound
+        return bound - self.padding
 
     def _bound(self, pts: F64, grid: F64, scene: o3d.t.geometry.RaycastingScene) -> F64:
         """:meth:`lower_bound` from ``grid`` (filled on demand from ``scene``)."""
@@ -88,17 +94,19 @@ class SceneDistance:
         return bound
 
     def query(self, points: F64, grounded: NDArray[np.bool_] | None = None) -> tuple[F64, F64]:
-        """Distances (N,) [m] (negative inside a closed mesh) and unit gradients (N, 3) (the direction that
-        increases the distance) of ``points`` (N, 3) [m]. Points where ``grounded`` (N,) is False are
-        measured without the ground meshes (default: all with; a robot's base stands on the floor)."""
+        """Distances (N,) [m] (negative inside a closed mesh; less the padding) and unit gradients (N, 3)
+        (the direction that increases the distance) of ``points`` (N, 3) [m]. Points where ``grounded``
+        (N,) is False are measured without the ground meshes (default: all with; a robot's base stands on
+        the floor)."""
         pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         if grounded is None or self._lifted is None:
-            return self._exact(pts)
+            dist, grad = self._exact(pts)
+            return dist - self.padding, grad
         raised = ~np.asarray(grounded, dtype=bool)
         dist, grad = np.empty(pts.shape[0]), np.empty((pts.shape[0], 3))
         dist[~raised], grad[~raised] = self._exact(pts[~raised])
         dist[raised], grad[raised] = self._exact(pts[raised], self._lifted)
-        return dist, grad
+        return dist - self.padding, grad
 
     def _exact(self, pts: F64, scene: o3d.t.geometry.RaycastingScene | None = None) -> tuple[F64, F64]:
         if pts.shape[0] == 0:

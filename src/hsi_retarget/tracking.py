@@ -31,7 +31,7 @@ from hsi_retarget.humanoid_ik import Footsteps, plan_footsteps
 from hsi_retarget.ik import IKSolver, IKTargets
 from hsi_retarget.joint_trajectory import ContactEvent
 from hsi_retarget.mapping import RobotGoals, nominal_configuration
-from hsi_retarget.part_arcs import PartArcs
+from hsi_retarget.part_arcs import PartArcs, part_layer
 from hsi_retarget.part_scene import PartPhase, follow_part
 from hsi_retarget.robots import RobotModel
 from hsi_retarget.scene_distance import SceneDistance
@@ -194,9 +194,7 @@ def track(
             if events:  # a hand that grasps what the part holds goes where that now is
                 goals = follow_part(goals, part, events)
                 versions.append((i, goals, list(corrections)))
-        now = (None, "") if part is None else part.at(float(goals.t[i]))
-        if arcs is not None and arcs.holding(float(goals.t[i])):  # where the holder has taken it
-            now = arcs.at(i, qs)
+        now = part_layer(part, arcs, goals.t, i, qs)  # standing open, or where the holder has taken it
         if now[0] is not layer[0] or now[1] != layer[1]:
             layer = now
             solver.set_part_scene(*layer)

@@ -21,8 +21,9 @@ report records the largest shift). The arm joints take it through the damped inv
 with the orientation kept (``dq = J^T (J J^T + damping^2 I)^-1 [shift; 0]``; both hands of a two-handed
 carry), clipped to the joint limits. After the release the shift is held for ``hold_s`` (the fingers open
 around the object) and eased out over ``ease_s``. The shifted hand keeps ``clearance_m`` to the furniture
-(:mod:`hsi_retarget.sim_check.shift_guard`: the shift loses its part towards a nearby wall). What the TCP
-lags its command at the release (the humanoid's pelvis leaning) is not corrected.
+(:mod:`hsi_retarget.sim_check.shift_guard`: the shift loses its part towards a nearby wall), and the
+shifted arm keeps that clearance to the rest of the robot (the shift is scaled down until it does). What
+the TCP lags its command at the release (the humanoid's pelvis leaning) is not corrected.
 """
 
 from __future__ import annotations
@@ -43,6 +44,7 @@ from hsi_retarget.sim_check.world import KIND_ROBOT, SimWorld
 
 F64 = NDArray[np.float64]
 _LOG = logging.getLogger(__name__)
+_ROOM_STEPS = 6  #: [-] bisection steps of the shift scale that keeps the arms' room (1/64 of it)
 
 
 @dataclass(frozen=True)
@@ -143,7 +145,19 @@ class PlaceFeedback:
                 self._hands, self._released_at = (), None
         if not self._hands or not np.any(self.shift) or self._guard is None:
             return q_ref
-        return self._apply(q_ref, self._guard.limit(q_ref, self._hands, weight * self.shift))
+        shift = self._guard.limit(q_ref, self._hands, weight * self.shift)
+        q = self._apply(q_ref, shift)
+        if self._guard.arm_room(q_ref, q, self._hands):
+            return q
+        lo, hi = 0.0, 1.0  # the largest part of the shift that keeps the arms' room (bisection)
+        for _ in range(_ROOM_STEPS):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (
+                (mid, hi)
+                if self._guard.arm_room(q_ref, self._apply(q_ref, mid * shift), self._hands)
+                else (lo, mid)
+            )
+        return self._apply(q_ref, lo * shift) if lo > 0.0 else q_ref
 
     def _touching(self) -> bool:
         """Whether the object touches anything but the robot (it is set down, or pressed against the
