@@ -60,22 +60,22 @@ def test_a_bad_rounding_step_is_refused() -> None:
         PartArcs(_phase(DRAWER), np.arange(10) / 24.0, RobotModel("dual_ur5e"), step=0.0)
 
 
-def test_frame_layers_are_the_part_scenes_the_tracking_heeded() -> None:
-    from hsi_retarget.part_arcs import frame_layers
-
+def test_the_tracking_lists_the_part_scene_each_frame_heeded() -> None:
     robot, phase, goals, solver = _pulled_drawer()  # held 1-4.8 s, pulled to 0.6 of its travel by 2 s
+    seen: list[tuple[float | None, str]] = []
+    set_scene = solver.set_part_scene
+
+    def spy(scene: SceneDistance | None, holder: str = "") -> None:
+        seen.append((_probe(scene), holder))
+        set_scene(scene, holder)
+
     for moving in (False, True):
-        seen: list[tuple[float | None, str]] = []
-        set_scene = solver.set_part_scene
-
-        def spy(scene: SceneDistance | None, holder: str = "", seen: list = seen) -> None:  # type: ignore[type-arg]
-            seen.append((_probe(scene), holder))
-            set_scene(scene, holder)
-
+        seen.clear()
         solver.set_part_scene = spy  # type: ignore[method-assign]
-        qs, _, _, diag = track(goals, robot, solver, RetargetConfig(moving_part=moving), part=phase)
+        cfg = RetargetConfig(moving_part=moving)
+        _, _, _, diag = track(goals, robot, solver, cfg, part=phase, trace=True)
         del solver.set_part_scene
-        layers = frame_layers(diag["part"], goals.t, qs, robot, moving)
+        layers = diag["layers"]
         assert len(layers) == goals.t.shape[0]
         assert layers[0] == (None, "")  # before the opening
         heeded = _runs([(_probe(s), h) for s, h in layers])
@@ -83,6 +83,10 @@ def test_frame_layers_are_the_part_scenes_the_tracking_heeded() -> None:
         held = [h for s, h in layers if s is not None]
         assert held and set(held) == {"right"}  # the holder's hand is exempt while the part is a layer
         assert len(heeded) > (5 if moving else 2)  # posed anew as the hand pulls it, or standing open
+        k = int(np.argmax(goals.t >= 3.0))  # a second pass from a frame on: the frames before as traced
+        again = track(goals, robot, solver, cfg, part=phase, resume=(k, diag["trace"]))[3]["layers"]
+        assert all(a is b for (a, _), (b, _) in zip(again[:k], layers[:k], strict=True))
+        assert [(_probe(s), h) for s, h in again] == [(_probe(s), h) for s, h in layers]
 
 
 def _runs(values: list[tuple[float | None, str]]) -> list[tuple[float | None, str]]:

@@ -104,7 +104,9 @@ def test_the_shifted_arm_keeps_its_room_to_the_rest_of_the_robot() -> None:
         return turned(float(angles[k]))
 
     plan = at(0.02)
-    assert guard.arm_room(plan, at(0.01), ("left",)) is False  # inside the 15 mm clearance, closer than planned
+    assert (
+        guard.arm_room(plan, at(0.01), ("left",)) is False
+    )  # within the 15 mm clearance, closer than planned
     assert guard.arm_room(plan, turned(0.0), ("left",))  # away from it
     assert guard.arm_room(at(0.01), at(0.01), ("left",))  # as planned: not pushed in further, so kept
     assert guard.arm_room(plan, at(0.001), ()) and not guard.arm_room(plan, at(0.001), ("left",))

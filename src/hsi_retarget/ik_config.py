@@ -46,6 +46,11 @@ class IKConfig:
     #: dual-arm ``drawer_can/reshape/1`` a finger reaching into the drawer passed its front 7 mm off in
     #: the plan (tip margin 5 mm), the held drawer crept 1.5 mm towards it and the hand lagged 2.4 mm
     part_margin: float = 0.005
+    #: [m] that clearance on a floating-base robot (the humanoid): its margins are wider already
+    #: (``tip_margin_far_floating``) and its part is posed where the holder's IK took it on every frame
+    #: (:mod:`hsi_retarget.part_arcs`); at 5 mm its reaches into drawers and cabinets missed (humanoid
+    #: benchmark 83 -> 77%)
+    part_margin_floating: float = 0.0
     #: [m] that clearance on a floating-base robot (the humanoid): its arms lag their command by 2-4 cm in
     #: MuJoCo while the pelvis and waist lean under them, and at 1.5 cm a forearm and the other upper arm,
     #: planned apart, met in the simulation (humanoid benchmark: collision-free 59 -> 66% at 3.5 cm)
@@ -103,6 +108,7 @@ class IKConfig:
             "self_margin_floating",
             "body_margin_floating",
             "part_margin",
+            "part_margin_floating",
             "held_margin",
             "candidate_slack",
         ):

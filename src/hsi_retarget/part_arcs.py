@@ -17,8 +17,8 @@ few posed scenes serve many frames. The holder's gripper and fingers stay exempt
 open.
 
 :func:`part_layer` is the part scene the IK heeds on one frame (standing open, or where the holder has
-taken it); :func:`frame_layers` lists it for every frame of a tracked path, for the checks that follow
-the tracking (:func:`~hsi_retarget.smoothing.keep_clearance`).
+taken it); the tracking lists it for every frame (``diag["layers"]`` of :func:`~hsi_retarget.tracking.track`)
+for the checks that follow it (:func:`~hsi_retarget.smoothing.keep_clearance`).
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ from hsi_retarget.part_scene import HandleArc, PartPhase
 from hsi_retarget.robots import RobotModel
 from hsi_retarget.scene_distance import SceneDistance
 
-__all__ = ["PartArcs", "frame_layers", "part_layer"]
+__all__ = ["PartArcs", "part_layer"]
 
 F64 = NDArray[np.float64]
 
@@ -92,12 +92,3 @@ def part_layer(
     if arcs is not None and arcs.holding(float(t[i])):
         now = arcs.at(i, qs)
     return now
-
-
-def frame_layers(
-    part: PartPhase | None, t: F64, qs: F64, robot: RobotModel, moving: bool
-) -> list[tuple[SceneDistance | None, str]]:
-    """:func:`part_layer` of every frame of the tracked path ``qs`` (T, nq) at ``t`` (T,) [s], with the
-    part following its holder when ``moving`` (:attr:`~hsi_retarget.retarget.RetargetConfig.moving_part`)."""
-    arcs = PartArcs(part, t, robot) if part is not None and moving else None
-    return [part_layer(part, arcs, t, i, qs) for i in range(t.shape[0])]

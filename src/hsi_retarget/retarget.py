@@ -47,7 +47,6 @@ from hsi_retarget.mapping import (
     map_to_robot,
 )
 from hsi_retarget.moved_target import moved_carries, shift_grasps
-from hsi_retarget.part_arcs import frame_layers
 from hsi_retarget.part_scene import PartPhase, opened_part
 from hsi_retarget.retrack import retrack_missed
 from hsi_retarget.robots import RobotModel
@@ -288,7 +287,8 @@ def retarget(
     goals = map_to_robot(motion, model, mapping)
     t_map = time.perf_counter() - t0
     solver = IKSolver(model, cfg.ik, _scene(scene, motion, source), cfg.support)
-    part = _part_phase(source, scene, motion, cfg.ik.part_margin)
+    padding = cfg.ik.part_margin_floating if model.floating else cfg.ik.part_margin
+    part = _part_phase(source, scene, motion, padding)
     handles: list[HandleHold] = []
     handle_holds: list[dict[str, Any]] = []
     if cfg.hold_handle if cfg.hold_handle is not None else model.floating:
@@ -326,9 +326,8 @@ def retarget(
             handles=handles,
         )
     goals = diag.pop("goals", goals)
-    posed = diag.pop("part", part)  # the posed part: its opening is diag["part_fraction"]
-    moving = cfg.moving_part if cfg.moving_part is not None else model.floating
-    layers = frame_layers(posed, goals.t, qs, model, moving) if posed is not None else None
+    diag.pop("part", None)  # the posed part: its opening is diag["part_fraction"]
+    layers = diag.pop("layers", None)  # the part scene each frame heeded
     qs, diag["smoothing_restored_frames"] = keep_clearance(
         solver, model, goals.t, qs, cfg.smoothing_hz, layers=layers
     )

@@ -125,7 +125,7 @@ def keep_clearance(
     the raw path smoothed at twice, then four times the cut-off, and finally into the raw path. Returns
     the path and the number of frames that needed the raw path or a higher cut-off. ``layers`` (T,): each
     frame's opened door or drawer and its exempt hand as the IK heeded them
-    (:func:`~hsi_retarget.part_arcs.frame_layers`; default: none), heeded here too."""
+    (``diag["layers"]`` of :func:`~hsi_retarget.tracking.track`; default: none), heeded here too."""
     path = smooth_joints(robot, t, raw, cutoff_hz)
     if t.shape[0] == 0 or np.array_equal(path, raw):
         return path, 0

@@ -60,6 +60,8 @@ class Trace:
     #: (frame, part) where the opened part was posed as the holder reached it (None: not posed)
     posed: tuple[int, PartPhase] | None = None
     feet: Footsteps | None = None  #: the floating base's footstep plan (the same for a second pass)
+    #: (T,) the opened part's scene and exempt hand that each frame heeded (``part_arcs.part_layer``)
+    layers: list[tuple[SceneDistance | None, str]] | None = None
 
 
 def frame_targets(
@@ -165,8 +167,11 @@ def track(
     moving = cfg.moving_part if cfg.moving_part is not None else robot.floating
     arcs = PartArcs(part, goals.t, robot) if part is not None and moving else None
     held_log: list[dict[str, Any]] = []
+    layers: list[tuple[SceneDistance | None, str]] = [(None, "")] * n  # the part layer of each frame
     if resume is not None and resume[0] > 0:
         start, old = resume
+        if old.layers is not None:
+            layers[:start] = old.layers[:start]
         if old.posed is not None and old.posed[0] < start:
             posed = old.posed
             part = posed[1]
@@ -198,6 +203,7 @@ def track(
         if now[0] is not layer[0] or now[1] != layer[1]:
             layer = now
             solver.set_part_scene(*layer)
+        layers[i] = layer
         for _, r, hand, _ in holds:
             if r == i:  # the hand opens: what it held stays behind
                 solver.release(hand)
@@ -253,7 +259,11 @@ def track(
         fallbacks_to[i], clear_to[i] = fallbacks, min_clear
     solver.set_part_scene(None)
     solver.release()
-    diag: dict[str, Any] = {"qp_fallbacks": fallbacks, "min_collision_slack_m": float(min_clear)}
+    diag: dict[str, Any] = {
+        "qp_fallbacks": fallbacks,
+        "min_collision_slack_m": float(min_clear),
+        "layers": layers,
+    }
     if objects:
         diag["held"] = held_log
     if feet is not None:
@@ -263,7 +273,7 @@ def track(
     if events:
         diag["goals"], diag["carry_corrections"] = goals, corrections
     if trace:
-        diag["trace"] = Trace(qs, pos_err, ori_err, fallbacks_to, clear_to, versions, posed, feet)
+        diag["trace"] = Trace(qs, pos_err, ori_err, fallbacks_to, clear_to, versions, posed, feet, layers)
     return qs, pos_err, ori_err, diag
 
 
