@@ -49,7 +49,7 @@ class IKConfig:
     #: [m] that clearance on a floating-base robot (the humanoid): its margins are wider already
     #: (``tip_margin_far_floating``) and its part is posed where the holder's IK took it on every frame
     #: (:mod:`hsi_retarget.part_arcs`); at 5 mm its reaches into drawers and cabinets missed (humanoid
-    #: benchmark 83 -> 77%)
+    #: benchmark 83 -> 77%; four of the five episodes re-run at 0 succeeded again)
     part_margin_floating: float = 0.0
     #: [m] that clearance on a floating-base robot (the humanoid): its arms lag their command by 2-4 cm in
     #: MuJoCo while the pelvis and waist lean under them, and at 1.5 cm a forearm and the other upper arm,

@@ -115,7 +115,8 @@ class RetargetConfig:
     #: humanoid's cabinet_bottle/reshape/2 the hand carrying the bottle out of the cabinet trailed its path
     #: by up to 20 cm in MuJoCo without it. On the dual arm (100 episodes, twice) it fixed such a carry
     #: (cabinet_bottle/reshape/1: the palm brushed the cabinet top) but lost as many episodes as it gained
-    #: (cabinet_bottle/plain/2: the bottle never grasped).
+    #: (cabinet_bottle/plain/2: the bottle never grasped); again with the part margin (2026-12-08):
+    #: 86 -> 84%, +3 / -5 (drawer_mug/reshape/1 fingers against the drawer's walls).
     hold_objects: bool | None = None
     #: [m] a grasp the IK missed by more than this holds nothing (the gripper closes beside the object)
     held_reach: float = 0.05
