@@ -15,10 +15,6 @@ part stands open in :class:`PartPhase`), as far open as the holder's tracked TCP
 before (:meth:`PartPhase.reached` between the TCP at the grasp and there), rounded to ``step`` so that a
 few posed scenes serve many frames. The holder's gripper and fingers stay exempt, as while the part stands
 open.
-
-:func:`part_layer` is the part scene the IK heeds on one frame (standing open, or where the holder has
-taken it); the tracking lists it for every frame (``diag["layers"]`` of :func:`~hsi_retarget.tracking.track`)
-for the checks that follow it (:func:`~hsi_retarget.smoothing.keep_clearance`).
 """
 
 from __future__ import annotations
@@ -33,7 +29,7 @@ from hsi_retarget.part_scene import HandleArc, PartPhase
 from hsi_retarget.robots import RobotModel
 from hsi_retarget.scene_distance import SceneDistance
 
-__all__ = ["PartArcs", "part_layer"]
+__all__ = ["PartArcs"]
 
 F64 = NDArray[np.float64]
 
@@ -80,15 +76,3 @@ class PartArcs:
         if scene is None:
             scene = self._posed[key] = part.posed(min(key * self.step, 1.0)).scene
         return scene, part.holder
-
-
-def part_layer(
-    part: PartPhase | None, arcs: PartArcs | None, t: F64, i: int, qs: F64
-) -> tuple[SceneDistance | None, str]:
-    """The part's scene and its exempt hand on frame ``i`` of times ``t`` (T,) [s]: where ``arcs`` (if
-    any) has the holder holding it, posed from the tracked ``qs`` (T, nq) before ``i``; else standing open
-    as :meth:`PartPhase.at` says; ``(None, '')`` without a part."""
-    now: tuple[SceneDistance | None, str] = (None, "") if part is None else part.at(float(t[i]))
-    if arcs is not None and arcs.holding(float(t[i])):
-        now = arcs.at(i, qs)
-    return now

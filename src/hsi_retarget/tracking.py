@@ -31,7 +31,7 @@ from hsi_retarget.humanoid_ik import Footsteps, plan_footsteps
 from hsi_retarget.ik import IKSolver, IKTargets
 from hsi_retarget.joint_trajectory import ContactEvent
 from hsi_retarget.mapping import RobotGoals, nominal_configuration
-from hsi_retarget.part_arcs import PartArcs, part_layer
+from hsi_retarget.part_arcs import PartArcs
 from hsi_retarget.part_scene import PartPhase, follow_part
 from hsi_retarget.robots import RobotModel
 from hsi_retarget.scene_distance import SceneDistance
@@ -60,7 +60,7 @@ class Trace:
     #: (frame, part) where the opened part was posed as the holder reached it (None: not posed)
     posed: tuple[int, PartPhase] | None = None
     feet: Footsteps | None = None  #: the floating base's footstep plan (the same for a second pass)
-    #: (T,) the opened part's scene and exempt hand that each frame heeded (``part_arcs.part_layer``)
+    #: (T,) the opened part's scene and exempt hand each frame heeded (``diag["layers"]`` of :func:`track`)
     layers: list[tuple[SceneDistance | None, str]] | None = None
 
 
@@ -143,7 +143,8 @@ def track(
     (:mod:`hsi_retarget.held_object`; ``diag["held"]`` lists them). ``stop``: track only the frames before
     it (the later rows stay zero, their errors NaN; with ``trace`` a later call can ``resume`` from it).
     ``handles``: holds of a handle whose goal slides along the part's arc towards the holder's TCP while
-    the part stands open (:mod:`hsi_retarget.handle_hold`)."""
+    the part stands open (:mod:`hsi_retarget.handle_hold`). ``diag["layers"]`` (T,): the part scene and
+    its exempt hand each frame heeded (``(None, '')``: none), for the checks after the tracking."""
     n = goals.t.shape[0]
     planned = resume[1].feet if resume is not None else None
     feet = planned if planned is not None else footstep_plan(robot, goals, cfg, part)
@@ -199,7 +200,9 @@ def track(
             if events:  # a hand that grasps what the part holds goes where that now is
                 goals = follow_part(goals, part, events)
                 versions.append((i, goals, list(corrections)))
-        now = part_layer(part, arcs, goals.t, i, qs)  # standing open, or where the holder has taken it
+        now = (None, "") if part is None else part.at(float(goals.t[i]))
+        if arcs is not None and arcs.holding(float(goals.t[i])):  # where the holder has taken it
+            now = arcs.at(i, qs)
         if now[0] is not layer[0] or now[1] != layer[1]:
             layer = now
             solver.set_part_scene(*layer)
