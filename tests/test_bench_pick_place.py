@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from hsi_nodes.cli import bench
-from hsi_planning.errors import ConfigError
+from hsi_planning.errors import ConfigError, PlanningError, RetargetError
 
 
 def _cases_module(repo_root: Path):  # type: ignore[no-untyped-def]
@@ -168,7 +168,6 @@ def test_a_replan_must_follow_what_the_hands_hold(repo_root: Path) -> None:
 
 
 def test_a_replan_joins_where_its_hands_hold_what_they_hold_now(repo_root: Path) -> None:
-    from hsi_planning.errors import RetargetError
     from hsi_planning.scene_paths import load_scene
     from hsi_retarget.joint_trajectory import ContactEvent, JointTrajectory
     from hsi_retarget.robots import RobotModel
@@ -235,3 +234,48 @@ def test_the_contact_miss_of_a_replan_is_what_its_arm_branch_search_left(repo_ro
     assert episode.contact_miss(_Traj(kept)) == pytest.approx(0.05)
     dropped = {"kept": False, "contact_error_before_m": 0.3, "contact_error_after_m": None}
     assert episode.contact_miss(_Traj(dropped)) == pytest.approx(0.3)
+
+
+def test_the_reaimed_schedule_comes_first_and_the_replan_only_where_it_misses(repo_root: Path) -> None:
+    sys.path.insert(0, str(repo_root / "benchmarks"))
+    try:
+        import _pick_place_episode as episode
+    finally:
+        sys.path.remove(str(repo_root / "benchmarks"))
+
+    class _Traj:
+        def __init__(self, miss: float) -> None:
+            report = {"kept": True, "contact_error_before_m": 0.3, "contact_error_after_m": miss}
+            self.meta = {"arm_branches": report} if miss > 0.0 else {}
+
+    def record() -> dict[str, object]:
+        return {"replan_errors": [], "reaimed": 0, "reaim_compared": 0, "replans_full": 0}
+
+    def never() -> _Traj:
+        raise AssertionError("the full re-plan is not needed when the re-aimed grasp is within reach")
+
+    def broken() -> _Traj:
+        raise PlanningError("no schedule on the new layout")
+
+    aimed, full = _Traj(0.0), _Traj(0.0)
+    rec = record()
+    assert episode._reaimed_or_replanned(lambda: aimed, never, rec) is aimed
+    assert rec["reaimed"] == 1 and rec["reaim_compared"] == 0 and rec["replans_full"] == 0
+    rec = record()  # the re-aimed grasp is out of reach and the re-plan reaches it
+    assert episode._reaimed_or_replanned(lambda: _Traj(0.05), lambda: full, rec) is full
+    assert rec["reaimed"] == 0 and rec["reaim_compared"] == 1 and rec["replans_full"] == 1
+    rec = record()  # the re-plan misses more: the re-aimed one stays
+    short = _Traj(0.04)
+    assert episode._reaimed_or_replanned(lambda: short, lambda: _Traj(0.06), rec) is short
+    rec = record()  # the re-plan fails: the re-aimed one stays, the error is kept
+    assert episode._reaimed_or_replanned(lambda: short, broken, rec) is short
+    assert rec["reaimed"] == 1 and "no schedule" in str(rec["replan_errors"])
+
+    def unaimable() -> _Traj:
+        raise RetargetError("the re-aimed grasp is off the robot's reach")
+
+    rec = record()  # the re-aiming fails: the re-plan is taken
+    assert episode._reaimed_or_replanned(unaimable, lambda: full, rec) is full
+    with pytest.raises(PlanningError):  # neither gives a trajectory
+        episode._reaimed_or_replanned(unaimable, broken, record())
+    assert episode.REAIM_FIRST == {"dual_ur5e": True, "humanoid": False}

@@ -309,6 +309,30 @@ def test_blocker_moved_first_then_target_then_put_back(
     np.testing.assert_allclose(s.info["carries"][2]["place"][:2], home[:2], atol=0.02)
 
 
+@pytest.mark.parametrize("corridor", [0.0, 0.05])
+def test_a_blocker_is_not_set_aside_beside_the_target(narrow: SceneWorld, corridor: float) -> None:
+    # the fingers close around the target and the palm and wrist follow them out: the strip kept free starts
+    # at the target's centre, not at the wrist's contact in front of it, and is as wide as the robot's
+    # approach corridor where that is wider than the target (the old strip offered spots 7-9 cm beside the
+    # can, where the bottle then stood in the gripper's way)
+    config = SchedulerConfig(auxiliary=AuxiliaryConfig(corridor_radius=corridor))
+    scheduler = Scheduler(narrow, ReachModelPlanner(), config)
+    spots = scheduler._spots("bottle1", "can1", WorldState())
+    assert len(spots) >= 4
+    can = object_pose(narrow.spec, "can1")[:3, 3]
+    axis = np.asarray(support_surfaces(narrow.spec)["shelf1/board1"].opening, dtype=np.float64)[:2]
+    size = narrow.object_size("bottle1")
+    radius = 0.5 * float(size[0])
+    half = max(0.5 * narrow.object_size("can1")[0], corridor)
+    keep = half + radius + config.auxiliary.corridor_margin
+    for _, pos in spots:
+        rel = pos[:2] - can[:2]
+        along, across = float(rel @ axis), abs(float(rel @ np.array([-axis[1], axis[0]])))
+        assert along <= -half or across >= keep - 1e-9, (pos, along, across, keep)
+    nearest = min(abs(float((p[:2] - can[:2]) @ np.array([-axis[1], axis[0]]))) for _, p in spots)
+    assert nearest < keep + 0.05  # still near the can: the strip does not push every spot far away
+
+
 def _take_out_reach(world: SceneWorld, obj: str) -> tuple[float, float]:
     """[m] how far past the front of the shelf the deepest point of ``obj`` lies before and after its
     first take-out in the schedule of picking can1 (negative: inside)."""

@@ -53,7 +53,6 @@ from hsi_planning.scheduler.hands import (
     needs_both_hands,
 )
 from hsi_planning.scheduler.linear_planner import LinearPlanner
-from hsi_planning.scheduler.reach_planner import contact_from_points
 from hsi_planning.scheduler.schedule import Schedule
 from hsi_planning.scheduler.timeline import Timeline
 from hsi_planning.scheduler.world import SceneWorld, WorldState, label_points
@@ -241,11 +240,15 @@ class Scheduler:
         cloud = self.world.state_cloud(state, complete=self.world.neighbours(target))
         axis = approach_axis(self.world, support_of(self.world.spec, target))
         pts = label_points(cloud, [target])
-        contact, _ = contact_from_points(pts, axis, self.config.auxiliary.palm_offset)
-        half = 0.5 * float(np.ptp(pts[:, :2], axis=0).max())
-        spots = free_spots(
-            self.world, state, blocker, cloud, avoid=(contact, axis, half), config=self.config.auxiliary
-        )
+        if len(pts) == 0:
+            raise PlanningError(f"the target {target!r} has no points in the cloud; no spot can be chosen")
+        # the corridor starts at the target's centre: the fingers close around it and the palm and wrist
+        # follow, so a blocker set down beside the target is as much in the way as one in front of it; it is
+        # as wide as the target, or the robot's approach corridor where that is wider
+        aux = self.config.auxiliary
+        centre = 0.5 * (pts.min(axis=0) + pts.max(axis=0))
+        half = max(0.5 * float(np.ptp(pts[:, :2], axis=0).max()), aux.corridor_radius)
+        spots = free_spots(self.world, state, blocker, cloud, avoid=(centre, axis, half), config=aux)
         if not spots:
             raise PlanningError(f"no free spot to put the blocking {blocker!r} aside")
         return spots
