@@ -17,7 +17,10 @@ target's grasp re-aimed at its new place (``robot_trajectory(..., moved=...)``,
 :mod:`hsi_retarget.moved_target`) and joined the same way. So is it when the re-plan's IK misses a grasp
 or release of a free object by more than the arm-branch trigger (:func:`contact_miss`) and the re-aimed
 executed schedule misses less there (``perturbation.reaim_compared`` counts the comparisons,
-``perturbation.reaimed`` the re-aimed trajectories taken).
+``perturbation.reaimed`` the re-aimed trajectories taken, ``perturbation.replans_full`` the full re-plans
+taken). That order is the humanoid's; the dual arm (:data:`REAIM_FIRST`) takes the re-aimed executed
+schedule first and the full re-plan only where the re-aimed one misses a contact and the re-plan misses
+less (:func:`_reaimed_or_replanned`): its executed door or drawer and stance stay as they are.
 Pushes are not re-planned (the controller recovers). The wrapper goes away when ``run_task`` takes a
 perturbation config.
 
