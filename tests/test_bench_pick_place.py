@@ -3,12 +3,14 @@ and without perturbations) that writes a complete JSON/Markdown/plot with sane n
 
 from __future__ import annotations
 
+import importlib
 import json
 import math
 import os
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -17,13 +19,21 @@ from hsi_nodes.cli import bench
 from hsi_planning.errors import ConfigError, PlanningError, RetargetError
 
 
-def _cases_module(repo_root: Path):  # type: ignore[no-untyped-def]
+def _bench_module(repo_root: Path, name: str) -> Any:
+    """The benchmark helper module ``name`` (``benchmarks/`` is not a package)."""
     sys.path.insert(0, str(repo_root / "benchmarks"))
     try:
-        import _pick_place_cases
+        return importlib.import_module(name)
     finally:
         sys.path.remove(str(repo_root / "benchmarks"))
-    return _pick_place_cases
+
+
+def _cases_module(repo_root: Path) -> Any:
+    return _bench_module(repo_root, "_pick_place_cases")
+
+
+def _episode_module(repo_root: Path) -> Any:
+    return _bench_module(repo_root, "_pick_place_episode")
 
 
 def test_cases_are_unseen_layouts_with_a_free_place_spot(repo_root: Path) -> None:
@@ -142,11 +152,7 @@ def _check_merge(repo_root: Path, run: Path, out: Path) -> None:
 def test_a_replan_must_follow_what_the_hands_hold(repo_root: Path) -> None:
     from hsi_retarget.joint_trajectory import ContactEvent
 
-    sys.path.insert(0, str(repo_root / "benchmarks"))
-    try:
-        import _pick_place_episode as episode
-    finally:
-        sys.path.remove(str(repo_root / "benchmarks"))
+    episode = _episode_module(repo_root)
     door, bottle = "cabinet1/door1", "bottle2"
     opens_then_grasps = [  # right opens and holds the door, left grasps, right closes the door
         ContactEvent(1.0, "right", "grasp", door),
@@ -172,11 +178,7 @@ def test_a_replan_joins_where_its_hands_hold_what_they_hold_now(repo_root: Path)
     from hsi_retarget.joint_trajectory import ContactEvent, JointTrajectory
     from hsi_retarget.robots import RobotModel
 
-    sys.path.insert(0, str(repo_root / "benchmarks"))
-    try:
-        import _pick_place_episode as episode
-    finally:
-        sys.path.remove(str(repo_root / "benchmarks"))
+    episode = _episode_module(repo_root)
     spec = load_scene("kitchen")
     door, bottle = "cabinet1/door1", "bottle2"
     events = (
@@ -219,11 +221,7 @@ def test_a_replan_joins_where_its_hands_hold_what_they_hold_now(repo_root: Path)
 
 
 def test_the_contact_miss_of_a_replan_is_what_its_arm_branch_search_left(repo_root: Path) -> None:
-    sys.path.insert(0, str(repo_root / "benchmarks"))
-    try:
-        import _pick_place_episode as episode
-    finally:
-        sys.path.remove(str(repo_root / "benchmarks"))
+    episode = _episode_module(repo_root)
 
     class _Traj:
         def __init__(self, report: dict[str, object] | None) -> None:
@@ -237,11 +235,7 @@ def test_the_contact_miss_of_a_replan_is_what_its_arm_branch_search_left(repo_ro
 
 
 def test_the_reaimed_schedule_comes_first_and_the_replan_only_where_it_misses(repo_root: Path) -> None:
-    sys.path.insert(0, str(repo_root / "benchmarks"))
-    try:
-        import _pick_place_episode as episode
-    finally:
-        sys.path.remove(str(repo_root / "benchmarks"))
+    episode = _episode_module(repo_root)
 
     class _Traj:
         def __init__(self, miss: float) -> None:

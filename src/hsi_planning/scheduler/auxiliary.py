@@ -16,7 +16,8 @@ out of a front opening (cabinets, shelves) blocks as well, nearest to the openin
 
 **Free spot.** Candidate spots on the open support surfaces (counters, tables, shelf boards; cabinet and
 drawer floors only when open) where the object's footprint holds no points, outside the target's take-out
-corridor, nearest first (at least ``spot_spread`` apart).
+corridor, nearest first (at least ``spot_spread`` apart). The scheduler starts that corridor at the
+target's centre (the fingers close around it) and makes it at least ``corridor_radius`` wide.
 """
 
 from __future__ import annotations
