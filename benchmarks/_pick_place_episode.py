@@ -285,15 +285,13 @@ def perturbed_execution(
                     new = reaimed()
                     record["reaimed"] += 1
                 else:
-                    record["replans_full"] += 1
-                    miss = contact_miss(new)
+                    full, miss = new, contact_miss(new)
                     if miss > 0.0 and record.get("schedule") is not None:  # the re-plan's IK misses a contact
                         aimed = reaimed()
                         record["reaim_compared"] += 1
                         if contact_miss(aimed) < miss:
                             new = aimed
-                            record["reaimed"] += 1
-                            record["replans_full"] -= 1
+                    record["replans_full" if new is full else "reaimed"] += 1
             t_now = world.time - start
             held = {h: body for (h, body), eq in world.welds.items() if world.data.eq_active[eq]}
             joined = join(new, world.robot_q(), t_now, world, held)
